@@ -1,0 +1,100 @@
+//! One bake: import → weld → DAG → `.mres` bytes.
+
+use crate::dag::{build_dag, BuildStats};
+use crate::settings::BakeSettings;
+use crate::weld::weld;
+use formats::import::{import_file, ImportLimits};
+use formats::SourceMesh;
+use std::path::Path;
+use std::time::Instant;
+
+/// The result of baking one mesh.
+pub struct Baked {
+    /// The `.mres` file.
+    pub bytes: Vec<u8>,
+    /// Figures about the build.
+    pub stats: BakeStats,
+}
+
+/// Figures about one bake, for reports and benchmarks.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct BakeStats {
+    /// Triangles in the source file.
+    pub source_triangles: u64,
+    /// Triangles dropped as degenerate (importer plus grid welding).
+    pub degenerate_dropped: u64,
+    /// Vertices after welding.
+    pub welded_vertices: u64,
+    /// Groups in the DAG.
+    pub groups: u64,
+    /// Clusters in the DAG.
+    pub clusters: u64,
+    /// DAG build figures.
+    pub build: BuildStats,
+    /// Seconds spent importing.
+    pub import_seconds: f64,
+    /// Seconds spent welding, building and writing.
+    pub build_seconds: f64,
+    /// Size of the `.mres` file.
+    pub bytes: u64,
+}
+
+/// Why a bake failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    /// The input could not be imported.
+    #[error(transparent)]
+    Import(#[from] formats::import::ImportError),
+    /// The settings are out of range.
+    #[error("settings: {0}")]
+    Settings(String),
+    /// The mesh has no triangles left after welding.
+    #[error("no triangles left after welding (all {0} were degenerate)")]
+    Empty(u64),
+    /// The DAG could not be written (a bug: the builder broke a format limit).
+    #[error("writing .mres: {0}")]
+    Write(#[from] formats::mres::write::WriteError),
+}
+
+/// Imports and bakes the mesh file at `path`.
+pub fn bake_file(path: &Path, settings: &BakeSettings) -> Result<Baked, BakeError> {
+    let start = Instant::now();
+    let mesh = import_file(path, &ImportLimits::default())?;
+    let import_seconds = start.elapsed().as_secs_f64();
+    let mut baked = bake_mesh(mesh, settings)?;
+    baked.stats.import_seconds = import_seconds;
+    Ok(baked)
+}
+
+/// Bakes an imported mesh (consumed, so its memory is freed once welded).
+pub fn bake_mesh(mesh: SourceMesh, settings: &BakeSettings) -> Result<Baked, BakeError> {
+    settings.check().map_err(BakeError::Settings)?;
+    let start = Instant::now();
+    let welded = weld(&mesh, settings);
+    let source_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
+    drop(mesh);
+    let welded = match welded {
+        Some(w) if !w.indices.is_empty() => w,
+        _ => return Err(BakeError::Empty(source_triangles)),
+    };
+    let (dag, build) = build_dag(&welded, settings);
+    let stats = BakeStats {
+        source_triangles,
+        degenerate_dropped: welded.degenerate_dropped,
+        welded_vertices: welded.positions.len() as u64,
+        groups: dag.groups.len() as u64,
+        clusters: dag.clusters.len() as u64,
+        build,
+        ..Default::default()
+    };
+    drop(welded);
+    let bytes = formats::mres::write_mres(&dag, settings.zstd_level)?;
+    Ok(Baked {
+        stats: BakeStats {
+            bytes: bytes.len() as u64,
+            build_seconds: start.elapsed().as_secs_f64(),
+            ..stats
+        },
+        bytes,
+    })
+}

@@ -1,0 +1,351 @@
+//! `mres`: validate, inspect, export and benchmark `.mres` files.
+
+use anyhow::{bail, Context, Result};
+use baker::bench::{run_clusterlod, run_mres, BuilderRun, CUT_THRESHOLDS};
+use baker::validate::{validate, ValidateOptions};
+use baker::BakeSettings;
+use clap::{Parser, Subcommand};
+use formats::mres::{select, MresFile, NO_GROUP};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "mres",
+    version,
+    about = "Validate, inspect, export and benchmark .mres cluster-DAG files"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Check a file: checksums and references, monotone errors and nested spheres, and
+    /// crack-free cuts at every uniform threshold and at random cameras. Exit 1 on any violation.
+    Validate {
+        /// The .mres file.
+        file: PathBuf,
+        /// Random view-dependent cuts to check.
+        #[arg(long, default_value_t = 1000)]
+        random_cuts: usize,
+        /// Seed of the random cameras.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Print a file's header, levels, groups, pages and sizes.
+    Inspect {
+        /// The .mres file.
+        file: PathBuf,
+        /// Print as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write a cut of the DAG as an OBJ mesh: the uniform cut at object-space error E, or the
+    /// view-dependent cut seen from a camera at a pixel threshold.
+    Export {
+        /// The .mres file.
+        file: PathBuf,
+        /// Object-space error of the uniform cut (0 = original geometry).
+        #[arg(long, conflicts_with = "camera")]
+        error: Option<f32>,
+        /// Eye position "x,y,z" of a view-dependent cut (60° vertical field of view).
+        #[arg(long, value_parser = parse_vec3, requires = "tau")]
+        camera: Option<[f32; 3]>,
+        /// Pixel threshold of the view-dependent cut.
+        #[arg(long)]
+        tau: Option<f32>,
+        /// Viewport height in pixels for the view-dependent cut.
+        #[arg(long, default_value_t = 1080.0)]
+        height: f32,
+        /// Output OBJ path.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Bake INPUT with mres and with meshoptimizer's clusterlod in the same run (each in its own
+    /// child process) and compare time, peak memory and quality.
+    Bench {
+        /// Mesh file (OBJ, glTF, GLB).
+        input: PathBuf,
+        /// Runs per builder; the minimum time and RSS are reported.
+        #[arg(long, default_value_t = 1)]
+        repeat: usize,
+        /// Print as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// One builder run of `bench` (internal).
+    #[command(hide = true)]
+    BenchChild {
+        /// "mres" or "clusterlod".
+        builder: String,
+        /// Mesh file.
+        input: PathBuf,
+    },
+    /// Write a generated test mesh as OBJ: sphere N (12·N² triangles, closed), terrain N
+    /// (2·N² triangles, open), boxes N (N disconnected boxes of 192 triangles).
+    Generate {
+        /// sphere, terrain or boxes.
+        kind: String,
+        /// Size parameter.
+        n: u32,
+        /// Output OBJ path.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+}
+
+fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| e.to_string())?;
+    v.try_into().map_err(|_| "expected x,y,z".to_string())
+}
+
+fn open(path: &Path) -> Result<MresFile> {
+    MresFile::open(path).with_context(|| format!("{}", path.display()))
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<ExitCode> {
+    match cli.command {
+        Command::Validate {
+            file,
+            random_cuts,
+            seed,
+            json,
+        } => {
+            let f = open(&file)?;
+            let report = validate(
+                &f,
+                &ValidateOptions {
+                    random_cuts,
+                    seed,
+                    ..Default::default()
+                },
+            )
+            .with_context(|| format!("{}", file.display()))?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                println!(
+                    "{}: {} bytes, {} source triangles, {:.2} bytes/input triangle, {} pages",
+                    file.display(),
+                    report.bytes,
+                    report.source_triangles,
+                    report.bytes_per_input_triangle,
+                    report.pages
+                );
+                println!(
+                    "levels {}  root groups {}  root clusters {}  level-0 fill {:.1}",
+                    report.levels, report.root_groups, report.root_clusters, report.level0_fill
+                );
+                println!(
+                    "{:>5} {:>9} {:>8} {:>11}",
+                    "level", "clusters", "groups", "triangles"
+                );
+                for l in &report.per_level {
+                    println!(
+                        "{:>5} {:>9} {:>8} {:>11}",
+                        l.level, l.clusters, l.groups, l.triangles
+                    );
+                }
+                println!(
+                    "cuts checked: {} uniform, {} random; cracked {}; relations checked {}",
+                    report.uniform_cuts,
+                    report.random_cuts,
+                    report.cracked_cuts,
+                    report.relations_checked
+                );
+                for v in &report.violations {
+                    println!("VIOLATION {}: {v}", file.display());
+                }
+                println!("{}", if report.ok() { "OK" } else { "FAILED" });
+            }
+            Ok(if report.ok() {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            })
+        }
+        Command::Inspect { file, json } => {
+            let f = open(&file)?;
+            inspect(&f, json)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Export {
+            file,
+            error,
+            camera,
+            tau,
+            height,
+            output,
+        } => {
+            let f = open(&file)?;
+            let cut = match (error, camera, tau) {
+                (Some(e), None, _) => select::uniform_cut(&f.groups, &f.clusters, e),
+                (None, Some(eye), Some(tau)) => {
+                    let radius = f.groups.first().map_or(1.0, |g| g.sphere.radius);
+                    let view = select::ViewParams {
+                        eye,
+                        proj_y: 1.0 / 30f32.to_radians().tan(),
+                        viewport_height: height,
+                        z_near: radius * 1e-3,
+                    };
+                    select::view_cut(&f.groups, &f.clusters, &view, tau)
+                }
+                _ => bail!("give --error E, or --camera x,y,z with --tau T"),
+            };
+            let mesh = baker::export::cut_mesh(&f, &cut)?;
+            let mut out = std::io::BufWriter::new(
+                std::fs::File::create(&output).with_context(|| format!("{}", output.display()))?,
+            );
+            formats::obj_write::write_obj(&mesh, &mut out)
+                .with_context(|| format!("{}", output.display()))?;
+            eprintln!(
+                "{}: {} clusters, {} triangles",
+                output.display(),
+                cut.len(),
+                mesh.triangle_count()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench {
+            input,
+            repeat,
+            json,
+        } => bench(&input, repeat.max(1), json),
+        Command::BenchChild { builder, input } => {
+            let settings = BakeSettings::default();
+            let mesh = formats::import::import_file(&input, &Default::default())?;
+            let run = match builder.as_str() {
+                "mres" => run_mres(mesh, &settings)?,
+                "clusterlod" => run_clusterlod(mesh, &settings)?,
+                other => bail!("unknown builder {other}"),
+            };
+            println!("{}", serde_json::to_string(&run)?);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Generate { kind, n, output } => {
+            let mesh = match kind.as_str() {
+                "sphere" => baker::generate::sphere(n),
+                "terrain" => baker::generate::terrain(n),
+                "boxes" => baker::generate::boxes(n, 4),
+                other => bail!("unknown kind {other} (sphere, terrain, boxes)"),
+            };
+            let mut out = std::io::BufWriter::new(
+                std::fs::File::create(&output).with_context(|| format!("{}", output.display()))?,
+            );
+            formats::obj_write::write_obj(&mesh, &mut out)?;
+            eprintln!("{}: {} triangles", output.display(), mesh.triangle_count());
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn inspect(f: &MresFile, json: bool) -> Result<()> {
+    let h = &f.header;
+    let level0 = f
+        .clusters
+        .iter()
+        .filter(|c| c.own_group == NO_GROUP)
+        .count();
+    let raw: u64 = f.pages.iter().map(|p| p.raw_size as u64).sum();
+    let value = serde_json::json!({
+        "flags": h.flags, "grid_origin": h.grid.origin, "grid_step": h.grid.step,
+        "position_bits": h.position_bits, "normal_bits": h.normal_bits, "levels": h.level_count,
+        "source_triangles": h.source_triangles, "groups": f.groups.len(), "clusters": f.clusters.len(),
+        "level0_clusters": level0, "pages": f.pages.len(), "file_bytes": f.file_size(), "raw_page_bytes": raw,
+        "stored_triangles": f.clusters.iter().map(|c| c.triangle_count as u64).sum::<u64>(),
+        "root_groups": f.groups.iter().filter(|g| g.error.is_infinite()).count(),
+    });
+    if json {
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    } else {
+        for (k, v) in value.as_object().into_iter().flatten() {
+            println!("{k:>18}: {v}");
+        }
+    }
+    Ok(())
+}
+
+fn bench(input: &Path, repeat: usize, json: bool) -> Result<ExitCode> {
+    let exe = std::env::current_exe()?;
+    let mut best: Vec<BuilderRun> = Vec::new();
+    for builder in ["mres", "clusterlod"] {
+        let mut runs = Vec::new();
+        for _ in 0..repeat {
+            let out = std::process::Command::new(&exe)
+                .args(["bench-child", builder])
+                .arg(input)
+                .output()?;
+            if !out.status.success() {
+                bail!(
+                    "{builder} on {}: {}",
+                    input.display(),
+                    String::from_utf8_lossy(&out.stderr)
+                );
+            }
+            runs.push(serde_json::from_slice::<BuilderRun>(&out.stdout)?);
+        }
+        let mut run = runs[0].clone();
+        run.seconds = runs.iter().map(|r| r.seconds).fold(f64::INFINITY, f64::min);
+        run.peak_rss_bytes = runs.iter().map(|r| r.peak_rss_bytes).min().unwrap_or(0);
+        best.push(run);
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&best)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    println!(
+        "{} ({} triangles), min over {repeat} run(s)",
+        input.display(),
+        best[0].input_triangles
+    );
+    println!(
+        "{:<11} {:>8} {:>10} {:>8} {:>6} {:>6} {:>6}  triangles per uniform cut at {:?} × diagonal",
+        "builder", "seconds", "peak MiB", "B/tri", "levels", "roots", "fill", CUT_THRESHOLDS
+    );
+    for r in &best {
+        println!(
+            "{:<11} {:>8.3} {:>10.1} {:>8.1} {:>6} {:>6} {:>6.1}  {:?}{}",
+            r.builder,
+            r.seconds,
+            r.peak_rss_bytes as f64 / 1048576.0,
+            r.peak_rss_bytes as f64 / r.input_triangles.max(1) as f64,
+            r.levels,
+            r.root_clusters,
+            r.level0_fill,
+            r.cut_triangles,
+            if r.bytes > 0 {
+                format!(
+                    "  file {:.2} B/input tri",
+                    r.bytes as f64 / r.input_triangles.max(1) as f64
+                )
+            } else {
+                String::new()
+            }
+        );
+    }
+    println!(
+        "time ratio mres/clusterlod {:.2}, peak RSS ratio {:.2}",
+        best[0].seconds / best[1].seconds,
+        best[0].peak_rss_bytes as f64 / best[1].peak_rss_bytes.max(1) as f64
+    );
+    Ok(ExitCode::SUCCESS)
+}

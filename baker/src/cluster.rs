@@ -1,0 +1,139 @@
+//! Cluster: split a triangle list into clusters of at most `max_triangles` triangles and
+//! `max_vertices` vertices with meshopt's meshlet builder, and bound them.
+//!
+//! Level 0 uses `meshopt_buildMeshletsSpatial` (SAH-driven, fill-weighted): measured on the
+//! Stanford dragon it fills level-0 clusters to 125+ of 128 triangles where the greedy
+//! `meshopt_buildMeshlets` reaches ~118 (see docs/BENCHMARKS.md).
+
+use crate::settings::BakeSettings;
+use formats::mres::Sphere;
+use meshopt::VertexDataAdapter;
+
+/// Splits `indices` (a triangle list into `positions`) into clusters; each returned cluster
+/// is a triangle list into the same vertex array.
+pub fn split(indices: &[u32], positions: &[[f32; 3]], settings: &BakeSettings) -> Vec<Vec<u32>> {
+    if indices.is_empty() {
+        return Vec::new();
+    }
+    let bytes = meshopt::typed_to_bytes(positions);
+    let Ok(adapter) = VertexDataAdapter::new(bytes, 12, 0) else {
+        return Vec::new();
+    };
+    let max_t = settings.max_triangles as usize;
+    let meshlets = match std::env::var("MRES_BUILDER").as_deref() {
+        Ok("greedy") => meshopt::build_meshlets(
+            indices,
+            &adapter,
+            settings.max_vertices as usize,
+            max_t,
+            0.0,
+        ),
+        Ok("flex") => meshopt::build_meshlets_flex(
+            indices,
+            &adapter,
+            settings.max_vertices as usize,
+            max_t / 2,
+            max_t,
+            0.0,
+            0.0,
+        ),
+        _ => meshopt::build_meshlets_spatial(
+            indices,
+            &adapter,
+            settings.max_vertices as usize,
+            max_t / 4,
+            max_t,
+            0.5,
+        ),
+    };
+    meshlets
+        .iter()
+        .map(|m| {
+            m.triangles
+                .iter()
+                .map(|&t| m.vertices[t as usize])
+                .collect()
+        })
+        .collect()
+}
+
+/// Bounding sphere of the vertices a triangle list uses (meshopt's Ritter-style bound).
+pub fn bounding_sphere(indices: &[u32], positions: &[[f32; 3]]) -> Sphere {
+    let bytes = meshopt::typed_to_bytes(positions);
+    match VertexDataAdapter::new(bytes, 12, 0) {
+        Ok(adapter) => {
+            let b = meshopt::compute_cluster_bounds(indices, &adapter);
+            // meshopt's sphere is exact up to float rounding; pad by one ulp-scale so that it
+            // provably contains every vertex.
+            let mut radius = b.radius;
+            for &i in indices {
+                radius = radius.max(distance(b.center, positions[i as usize]));
+            }
+            Sphere {
+                center: b.center,
+                radius: radius * (1.0 + 1e-6),
+            }
+        }
+        Err(_) => Sphere {
+            center: [0.0; 3],
+            radius: 0.0,
+        },
+    }
+}
+
+/// Smallest-effort sphere enclosing `spheres` (centre of their bounding box, radius to the
+/// farthest surface), padded so that containment survives float rounding.
+pub fn enclosing_sphere(spheres: impl Iterator<Item = Sphere> + Clone) -> Sphere {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for s in spheres.clone() {
+        for k in 0..3 {
+            lo[k] = lo[k].min(s.center[k] - s.radius);
+            hi[k] = hi[k].max(s.center[k] + s.radius);
+        }
+    }
+    let center = [
+        (lo[0] + hi[0]) * 0.5,
+        (lo[1] + hi[1]) * 0.5,
+        (lo[2] + hi[2]) * 0.5,
+    ];
+    let radius = spheres
+        .map(|s| distance(center, s.center) + s.radius)
+        .fold(0.0f32, f32::max);
+    Sphere {
+        center,
+        radius: radius * (1.0 + 1e-6),
+    }
+}
+
+/// Euclidean distance.
+pub fn distance(a: [f32; 3], b: [f32; 3]) -> f32 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn enclosing_sphere_contains_inputs() {
+        let spheres = [
+            Sphere {
+                center: [0.0, 0.0, 0.0],
+                radius: 1.0,
+            },
+            Sphere {
+                center: [5.0, 1.0, 0.0],
+                radius: 0.5,
+            },
+            Sphere {
+                center: [2.0, -3.0, 1.0],
+                radius: 2.0,
+            },
+        ];
+        let s = enclosing_sphere(spheres.iter().copied());
+        for c in spheres {
+            assert!(distance(s.center, c.center) + c.radius <= s.radius);
+        }
+    }
+}

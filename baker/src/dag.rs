@@ -1,0 +1,373 @@
+//! DAG assembly: level-0 clusters, then repeatedly group (METIS), simplify each group in
+//! parallel with its border locked, and split the result into parent clusters, until one root
+//! group remains (DESIGN.md "The idea in one paragraph"; seed 000 §3.1, seed 002 §3.5).
+//!
+//! Errors and spheres are made monotone while building: a group's error is the max of its
+//! simplification error and its members' own errors, and its sphere encloses its members'
+//! own spheres. The result is independent of the rayon thread count: groups are simplified in
+//! parallel but collected in partition order.
+
+use crate::cluster::{bounding_sphere, enclosing_sphere, split};
+use crate::partition::{cluster_graph, partition};
+use crate::settings::BakeSettings;
+use crate::simplify::{simplify_group, Method};
+use crate::weld::WeldedMesh;
+use formats::mres::{
+    Dag, DagCluster, Group, Header, Sphere, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS, NO_GROUP,
+};
+use rayon::prelude::*;
+
+/// Most clusters the final root group may hold. A mesh whose coarsest clusters cannot be
+/// simplified further (an open boundary is locked in every cut) ends in one root group of up
+/// to this many clusters; beyond it, several root groups are formed and reported.
+pub const MAX_ROOT_CLUSTERS: usize = 256;
+/// Safety stop on the number of levels.
+const MAX_LEVELS: u32 = 64;
+
+/// One cluster while building.
+struct Cluster {
+    /// Triangle list into the welded mesh's vertices.
+    indices: Vec<u32>,
+    /// The group that produced it, or `NO_GROUP`.
+    own_group: u32,
+    /// Own sphere: cluster bounds at level 0, the producing group's sphere above.
+    own_sphere: Sphere,
+    /// Own error: 0 at level 0, the producing group's error above.
+    own_error: f32,
+    /// The group it belongs to (assigned when its group is simplified or made root).
+    group: u32,
+}
+
+/// Figures about one build, for reports.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct BuildStats {
+    /// Groups simplified with each method: regular, permissive, prune, sloppy.
+    pub methods: [u64; 4],
+    /// Groups whose simplification got stuck (their clusters waited for the next level).
+    pub stuck_groups: u64,
+    /// Number of root groups (1 unless the coarsest level is larger than `MAX_ROOT_CLUSTERS`).
+    pub root_groups: u64,
+    /// Clusters in the root group(s).
+    pub root_clusters: u64,
+}
+
+/// Builds the cluster DAG of a welded mesh.
+pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats) {
+    let mut stats = BuildStats::default();
+    let mut clusters: Vec<Cluster> = split(&mesh.indices, &mesh.positions, settings)
+        .into_par_iter()
+        .map(|indices| {
+            let own_sphere = bounding_sphere(&indices, &mesh.positions);
+            Cluster {
+                indices,
+                own_group: NO_GROUP,
+                own_sphere,
+                own_error: 0.0,
+                group: NO_GROUP,
+            }
+        })
+        .collect();
+    let (always_locked, special) = open_and_nonmanifold(mesh);
+    let mut groups: Vec<Group> = Vec::new();
+    let mut pending: Vec<usize> = (0..clusters.len()).collect();
+    let mut level = 0u32;
+
+    loop {
+        if pending.len() <= 1 || level >= MAX_LEVELS {
+            break;
+        }
+        let refs: Vec<&[u32]> = pending
+            .iter()
+            .map(|&c| clusters[c].indices.as_slice())
+            .collect();
+        let centers: Vec<[f32; 3]> = pending
+            .iter()
+            .map(|&c| clusters[c].own_sphere.center)
+            .collect();
+        let graph = cluster_graph(&refs, &mesh.position_ids, &centers);
+        let parts = partition(&graph, settings.group_size as usize);
+        // Which group uses each position; positions used by two groups are locked.
+        let mut owner = vec![u32::MAX; mesh.position_count];
+        for (g, part) in parts.iter().enumerate() {
+            for &c in part {
+                for &v in refs[c as usize] {
+                    let o = &mut owner[mesh.position_ids[v as usize] as usize];
+                    *o = if *o == u32::MAX || *o == g as u32 {
+                        g as u32
+                    } else {
+                        u32::MAX - 1
+                    };
+                }
+            }
+        }
+        let locked = |v: u32| {
+            let p = mesh.position_ids[v as usize] as usize;
+            owner[p] == u32::MAX - 1 || always_locked[p]
+        };
+        let mut results: Vec<Option<(Vec<Vec<u32>>, f32, Method)>> = parts
+            .par_iter()
+            .map(|part| {
+                let merged: Vec<u32> = part
+                    .iter()
+                    .flat_map(|&c| refs[c as usize].iter().copied())
+                    .collect();
+                let s = simplify_group(mesh, &merged, locked, settings)?;
+                Some((
+                    split(&s.indices, &mesh.positions, settings),
+                    s.error,
+                    s.method,
+                ))
+            })
+            .collect();
+        revert_conflicts(mesh, &special, &parts, &refs, &mut results);
+        drop(refs);
+
+        let mut next = Vec::new();
+        let mut progressed = false;
+        for (part, result) in parts.iter().zip(results) {
+            let members: Vec<usize> = part.iter().map(|&c| pending[c as usize]).collect();
+            let Some((children, error, method)) = result else {
+                stats.stuck_groups += 1;
+                next.extend_from_slice(&members);
+                continue;
+            };
+            progressed = true;
+            stats.methods[method as usize] += 1;
+            let id = groups.len() as u32;
+            let sphere = enclosing_sphere(members.iter().map(|&c| clusters[c].own_sphere));
+            let error = members
+                .iter()
+                .map(|&c| clusters[c].own_error)
+                .fold(error, f32::max);
+            groups.push(Group {
+                sphere,
+                error,
+                level,
+                first_cluster: 0,
+                cluster_count: 0,
+                page: 0,
+            });
+            for &c in &members {
+                clusters[c].group = id;
+            }
+            for indices in children {
+                next.push(clusters.len());
+                clusters.push(Cluster {
+                    indices,
+                    own_group: id,
+                    own_sphere: sphere,
+                    own_error: error,
+                    group: NO_GROUP,
+                });
+            }
+        }
+        next.sort_unstable();
+        pending = next;
+        level += 1;
+        if !progressed {
+            break;
+        }
+    }
+
+    // Root group(s): whatever could not be simplified further. Error +inf: always drawn
+    // when nothing coarser exists.
+    let roots: Vec<Vec<usize>> = if pending.len() <= MAX_ROOT_CLUSTERS {
+        vec![pending.clone()]
+    } else {
+        let refs: Vec<&[u32]> = pending
+            .iter()
+            .map(|&c| clusters[c].indices.as_slice())
+            .collect();
+        let centers: Vec<[f32; 3]> = pending
+            .iter()
+            .map(|&c| clusters[c].own_sphere.center)
+            .collect();
+        let graph = cluster_graph(&refs, &mesh.position_ids, &centers);
+        partition(&graph, settings.group_size as usize)
+            .into_iter()
+            .map(|p| p.into_iter().map(|c| pending[c as usize]).collect())
+            .collect()
+    };
+    stats.root_groups = roots.len() as u64;
+    stats.root_clusters = pending.len() as u64;
+    for members in roots {
+        let id = groups.len() as u32;
+        let sphere = enclosing_sphere(members.iter().map(|&c| clusters[c].own_sphere));
+        groups.push(Group {
+            sphere,
+            error: f32::INFINITY,
+            level,
+            first_cluster: 0,
+            cluster_count: 0,
+            page: 0,
+        });
+        for &c in &members {
+            clusters[c].group = id;
+        }
+    }
+    (to_dag(mesh, settings, groups, clusters), stats)
+}
+
+/// Edge key of two position ids, independent of direction.
+fn edge_key(a: u32, b: u32) -> u64 {
+    (a.min(b) as u64) << 32 | a.max(b) as u64
+}
+
+/// Position-id edge keys of a triangle list, one per triangle side.
+fn edge_keys<'a>(mesh: &'a WeldedMesh, indices: &'a [u32]) -> impl Iterator<Item = u64> + 'a {
+    indices.chunks_exact(3).flat_map(move |t| {
+        (0..3).map(move |k| {
+            edge_key(
+                mesh.position_ids[t[k] as usize],
+                mesh.position_ids[t[(k + 1) % 3] as usize],
+            )
+        })
+    })
+}
+
+/// The original's open (used once) and non-manifold (used 3+ times) edges, with their use
+/// counts, sorted; and per position whether it lies on one. Those positions stay locked at
+/// every level so that every cut has exactly the original's boundary.
+fn open_and_nonmanifold(mesh: &WeldedMesh) -> (Vec<bool>, Vec<(u64, u32)>) {
+    let mut edges: Vec<u64> = mesh
+        .indices
+        .par_chunks(3 * 4096)
+        .flat_map_iter(|c| edge_keys(mesh, c))
+        .collect();
+    edges.par_sort_unstable();
+    let mut locked = vec![false; mesh.position_count];
+    let mut special = Vec::new();
+    for run in edges.chunk_by(|a, b| a == b) {
+        if run.len() != 2 {
+            locked[(run[0] >> 32) as usize] = true;
+            locked[(run[0] & 0xffff_ffff) as usize] = true;
+            special.push((run[0], run.len() as u32));
+        }
+    }
+    (locked, special)
+}
+
+/// Each group's output is checked on its own (border kept, interior manifold), but two groups
+/// can each add the same chord between two border vertices they share, which together makes
+/// an edge used four times. Find such edges in the level's result and put the groups that
+/// produced them back as stuck (their members wait for the next level), until none remain.
+fn revert_conflicts(
+    mesh: &WeldedMesh,
+    special: &[(u64, u32)],
+    parts: &[Vec<u32>],
+    refs: &[&[u32]],
+    results: &mut [Option<(Vec<Vec<u32>>, f32, Method)>],
+) {
+    loop {
+        // (edge, producing group or u32::MAX for clusters kept as they are)
+        let mut edges: Vec<(u64, u32)> = parts
+            .par_iter()
+            .zip(results.par_iter())
+            .enumerate()
+            .flat_map_iter(|(g, (part, result))| -> Vec<(u64, u32)> {
+                match result {
+                    Some((children, _, _)) => children
+                        .iter()
+                        .flat_map(|c| edge_keys(mesh, c))
+                        .map(|k| (k, g as u32))
+                        .collect(),
+                    None => part
+                        .iter()
+                        .flat_map(|&c| edge_keys(mesh, refs[c as usize]))
+                        .map(|k| (k, u32::MAX))
+                        .collect(),
+                }
+            })
+            .collect();
+        edges.par_sort_unstable();
+        let mut conflicting: Vec<u32> = Vec::new();
+        for run in edges.chunk_by(|a, b| a.0 == b.0) {
+            let expected = special
+                .binary_search_by_key(&run[0].0, |e| e.0)
+                .map_or(2, |i| special[i].1);
+            if run.len() as u32 != expected {
+                conflicting.extend(run.iter().map(|e| e.1).filter(|&g| g != u32::MAX));
+            }
+        }
+        if conflicting.is_empty() {
+            return;
+        }
+        for g in conflicting {
+            results[g as usize] = None;
+        }
+    }
+}
+
+/// Converts the build result to the logical DAG the writer takes: per cluster, a local vertex
+/// array (grid positions, normals, UVs) and 8-bit local indices.
+fn to_dag(
+    mesh: &WeldedMesh,
+    settings: &BakeSettings,
+    groups: Vec<Group>,
+    clusters: Vec<Cluster>,
+) -> Dag {
+    let mut flags = 0;
+    if mesh.normals.is_some() {
+        flags |= FLAG_NORMALS;
+    }
+    if mesh.uvs.is_some() {
+        flags |= FLAG_UVS;
+    }
+    if mesh.multi_material {
+        flags |= FLAG_MATERIALS;
+    }
+    let clusters = clusters
+        .into_par_iter()
+        .map(|c| {
+            // Local vertex array and 8-bit indices, reordered for compression (meshopt level 3:
+            // "the sweet spot for compression ratio").
+            let (mut vertices, mut indices) = meshopt::extract_meshlet_indices(&c.indices);
+            meshopt::optimize_meshlet_level(&mut vertices, &mut indices, 3);
+            let triangle_vertex: Vec<u32> = indices
+                .chunks_exact(3)
+                .map(|t| vertices[t[0] as usize])
+                .collect();
+            DagCluster {
+                group: c.group,
+                own_group: c.own_group,
+                positions: vertices
+                    .iter()
+                    .map(|&v| mesh.grid_positions[v as usize])
+                    .collect(),
+                normals: mesh
+                    .normals
+                    .as_ref()
+                    .map(|n| vertices.iter().map(|&v| n[v as usize]).collect())
+                    .unwrap_or_default(),
+                uvs: mesh
+                    .uvs
+                    .as_ref()
+                    .map(|u| vertices.iter().map(|&v| u[v as usize]).collect())
+                    .unwrap_or_default(),
+                materials: if mesh.multi_material {
+                    triangle_vertex
+                        .iter()
+                        .map(|&v| mesh.materials[v as usize].min(u16::MAX as u32) as u16)
+                        .collect()
+                } else {
+                    Vec::new()
+                },
+                indices,
+            }
+        })
+        .collect();
+    let header = Header {
+        flags,
+        grid: mesh.grid,
+        uv: mesh.uv,
+        normal_bits: settings.normal_bits,
+        position_bits: settings.position_bits,
+        level_count: 0,
+        source_triangles: mesh.source_triangles,
+    };
+    Dag {
+        header,
+        groups,
+        clusters,
+    }
+}

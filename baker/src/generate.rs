@@ -1,0 +1,147 @@
+//! Generated test meshes: a closed cube-sphere, an open terrain, a field of disconnected boxes.
+//! Used by tests, benchmarks and `mres generate`.
+
+use formats::SourceMesh;
+
+fn mesh(positions: Vec<[f32; 3]>, indices: Vec<u32>) -> SourceMesh {
+    let materials = vec![0; indices.len() / 3];
+    SourceMesh {
+        positions,
+        normals: None,
+        uvs: None,
+        indices,
+        materials,
+        degenerate_dropped: 0,
+    }
+}
+
+/// A closed sphere of radius 1 made from a cube with `n`×`n` quads per face (12·n² triangles),
+/// with normals. Vertices on cube edges are generated once, so the mesh is watertight.
+pub fn sphere(n: u32) -> SourceMesh {
+    let n = n.max(1) as i32;
+    let mut index_of = std::collections::HashMap::new();
+    let mut positions = Vec::new();
+    let mut vertex = |p: [i32; 3]| -> u32 {
+        *index_of.entry(p).or_insert_with(|| {
+            let v = [
+                p[0] as f32 / n as f32,
+                p[1] as f32 / n as f32,
+                p[2] as f32 / n as f32,
+            ];
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            positions.push([v[0] / l, v[1] / l, v[2] / l]);
+            positions.len() as u32 - 1
+        })
+    };
+    let mut indices = Vec::new();
+    for axis in 0..3 {
+        for side in [-n, n] {
+            for i in 0..n {
+                for j in 0..n {
+                    let at = |a: i32, b: i32| {
+                        let mut p = [0; 3];
+                        p[axis] = side;
+                        p[(axis + 1) % 3] = -n + 2 * a;
+                        p[(axis + 2) % 3] = -n + 2 * b;
+                        p
+                    };
+                    let (i, j) = (i, j);
+                    let q = [
+                        vertex(at(i, j)),
+                        vertex(at(i + 1, j)),
+                        vertex(at(i + 1, j + 1)),
+                        vertex(at(i, j + 1)),
+                    ];
+                    // Outward winding on both sides.
+                    if side > 0 {
+                        indices.extend_from_slice(&[q[0], q[1], q[2], q[0], q[2], q[3]]);
+                    } else {
+                        indices.extend_from_slice(&[q[0], q[2], q[1], q[0], q[3], q[2]]);
+                    }
+                }
+            }
+        }
+    }
+    let normals = positions.clone();
+    SourceMesh {
+        normals: Some(normals),
+        ..mesh(positions, indices)
+    }
+}
+
+/// An open height-field terrain of `n`×`n` quads (2·n² triangles) over [0, 1]², with UVs.
+pub fn terrain(n: u32) -> SourceMesh {
+    let n = n.max(1);
+    let mut positions = Vec::with_capacity(((n + 1) * (n + 1)) as usize);
+    let mut uvs = Vec::with_capacity(positions.capacity());
+    for y in 0..=n {
+        for x in 0..=n {
+            let (u, v) = (x as f32 / n as f32, y as f32 / n as f32);
+            let h = 0.08 * (u * 9.0).sin() * (v * 7.0).cos()
+                + 0.03 * (u * 31.0 + v * 17.0).sin()
+                + 0.01 * (u * 97.0).cos() * (v * 83.0).sin();
+            positions.push([u, h, v]);
+            uvs.push([u, v]);
+        }
+    }
+    let row = n + 1;
+    let mut indices = Vec::with_capacity((n * n * 6) as usize);
+    for y in 0..n {
+        for x in 0..n {
+            let i = y * row + x;
+            indices.extend_from_slice(&[i, i + row, i + 1, i + 1, i + row, i + row + 1]);
+        }
+    }
+    SourceMesh {
+        uvs: Some(uvs),
+        ..mesh(positions, indices)
+    }
+}
+
+/// `count` disconnected closed boxes on a square grid, each face split into `k`×`k` quads
+/// (12·k² triangles per box; k = 4 gives 192).
+pub fn boxes(count: u32, k: u32) -> SourceMesh {
+    let unit = sphere_free_box(k.max(1));
+    let side = (count as f32).sqrt().ceil() as u32;
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for b in 0..count {
+        let (gx, gz) = ((b % side) as f32 * 2.0, (b / side) as f32 * 2.0);
+        let scale = 0.6 + 0.3 * ((b * 7919) % 13) as f32 / 13.0;
+        let base = positions.len() as u32;
+        positions.extend(
+            unit.positions
+                .iter()
+                .map(|p| [gx + p[0] * scale, p[1] * scale, gz + p[2] * scale]),
+        );
+        indices.extend(unit.indices.iter().map(|i| base + i));
+    }
+    mesh(positions, indices)
+}
+
+/// A closed unit box from −0.5 to 0.5 with `k`×`k` quads per face.
+fn sphere_free_box(k: u32) -> SourceMesh {
+    let cube = sphere(k);
+    // Project the cube-sphere back onto the cube: same topology, flat faces.
+    let positions = cube
+        .positions
+        .iter()
+        .map(|p| {
+            let m = p[0].abs().max(p[1].abs()).max(p[2].abs());
+            [p[0] / m * 0.5, p[1] / m * 0.5, p[2] / m * 0.5]
+        })
+        .collect();
+    mesh(positions, cube.indices)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn generated_sizes() {
+        assert_eq!(sphere(10).triangle_count(), 1200);
+        assert_eq!(terrain(10).triangle_count(), 200);
+        assert_eq!(boxes(16, 4).triangle_count(), 16 * 192);
+    }
+}

@@ -1,0 +1,18 @@
+//! The mres baker: weld, cluster, group (METIS), simplify (meshopt, locked borders), assemble
+//! the DAG and write `.mres`; plus the validator and the helpers behind the commands.
+#![deny(missing_docs)]
+
+pub mod bake;
+pub mod bench;
+pub mod cluster;
+pub mod config;
+pub mod dag;
+pub mod export;
+pub mod generate;
+pub mod partition;
+pub mod settings;
+pub mod simplify;
+pub mod validate;
+pub mod weld;
+
+pub use settings::BakeSettings;

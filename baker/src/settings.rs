@@ -1,0 +1,99 @@
+//! Bake settings: every knob of the DAG build, with the defaults `pipeline.toml` documents.
+
+use serde::{Deserialize, Serialize};
+
+/// Settings of one bake. Each field says which step it feeds; [`BakeSettings::default`]
+/// gives the defaults and why.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BakeSettings {
+    /// Weld/quantize: bits of the global position grid along the mesh's largest extent
+    /// (8..=24). 16 gives a step of 1/65535 of the extent (≈ 0.03 mm on a 2 m object).
+    pub position_bits: u32,
+    /// Encode: bits per octahedral normal component (4..=16).
+    pub normal_bits: u32,
+    /// Cluster: most triangles per cluster (≤ 128, multiple of 4).
+    pub max_triangles: u32,
+    /// Cluster: most vertices per cluster (≤ 256; 8-bit local indices).
+    pub max_vertices: u32,
+    /// Partition: target clusters per group; groups fall in `[target/2, 3*target/2]`.
+    pub group_size: u32,
+    /// Simplify: each group aims at this fraction of its triangles.
+    pub simplify_ratio: f32,
+    /// Simplify: a group that keeps more than this fraction is stuck; it tries the permissive
+    /// and then the sloppy fallback, and if still stuck its clusters wait for the next level.
+    pub stuck_ratio: f32,
+    /// Simplify: weight of normals against positions in the attribute-aware quadric.
+    pub normal_weight: f32,
+    /// Simplify: weight of UVs against positions in the attribute-aware quadric.
+    pub uv_weight: f32,
+    /// Write: zstd level of the pages (1..=22).
+    pub zstd_level: i32,
+    /// Keep normals from the source (if it has them).
+    pub keep_normals: bool,
+    /// Keep UVs from the source (if it has them).
+    pub keep_uvs: bool,
+}
+
+impl Default for BakeSettings {
+    fn default() -> Self {
+        BakeSettings {
+            // Fine enough for scans at 1:65535, and keeps per-cluster packed positions short.
+            position_bits: 16,
+            // 12 bits: < 0.05° mean normal error, 3 bytes per vertex.
+            normal_bits: 12,
+            // Nanite's cluster size; the mesh-shader limits are 256 vertices / 256 primitives.
+            max_triangles: 128,
+            max_vertices: 255,
+            // ~16 clusters per group (Nanite uses 8–32): halving 2k triangles keeps borders short.
+            group_size: 16,
+            simplify_ratio: 0.5,
+            // clusterlod's threshold: keeping over 85% is not worth a level.
+            stuck_ratio: 0.85,
+            normal_weight: 0.5,
+            uv_weight: 0.5,
+            // zstd 9: close to the ratio of 19 at a fraction of the time.
+            zstd_level: 9,
+            keep_normals: true,
+            keep_uvs: true,
+        }
+    }
+}
+
+impl BakeSettings {
+    /// Checks every value's range; the message names the key.
+    pub fn check(&self) -> Result<(), String> {
+        let range = |key: &str, v: u32, lo: u32, hi: u32| {
+            if (lo..=hi).contains(&v) {
+                Ok(())
+            } else {
+                Err(format!("{key} = {v} is outside {lo}..={hi}"))
+            }
+        };
+        range("position_bits", self.position_bits, 8, 24)?;
+        range("normal_bits", self.normal_bits, 4, 16)?;
+        range("max_triangles", self.max_triangles, 8, 128)?;
+        range("max_vertices", self.max_vertices, 3 * 4, 256)?;
+        range("group_size", self.group_size, 2, 64)?;
+        range("zstd_level", self.zstd_level.max(0) as u32, 1, 22)?;
+        if self.max_triangles % 4 != 0 {
+            return Err(format!(
+                "max_triangles = {} must be a multiple of 4",
+                self.max_triangles
+            ));
+        }
+        let unit = |key: &str, v: f32| {
+            if v > 0.0 && v < 1.0 {
+                Ok(())
+            } else {
+                Err(format!("{key} = {v} must be in (0, 1)"))
+            }
+        };
+        unit("simplify_ratio", self.simplify_ratio)?;
+        unit("stuck_ratio", self.stuck_ratio)?;
+        if !(self.normal_weight >= 0.0 && self.uv_weight >= 0.0) {
+            return Err("normal_weight and uv_weight must be ≥ 0".into());
+        }
+        Ok(())
+    }
+}

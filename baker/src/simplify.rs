@@ -1,0 +1,327 @@
+//! Simplify: reduce one group to about half its triangles with its border locked
+//! (meshopt `simplify_with_attributes_and_locks`, absolute error, normals and UVs weighted),
+//! with a permissive and then a sloppy fallback when the group is stuck (as clusterlod does).
+
+use crate::settings::BakeSettings;
+use crate::weld::WeldedMesh;
+use meshopt::{SimplifyOptions, VertexDataAdapter};
+
+/// Which simplifier produced a group's result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Method {
+    /// Attribute-aware edge collapse that respects seams.
+    Regular,
+    /// Edge collapse allowed across attribute seams.
+    Permissive,
+    /// Whole small components removed (`meshopt_simplifyPrune`), for groups of many
+    /// disconnected parts that cannot be simplified one by one (closed boxes, cards).
+    Prune,
+    /// Vertex clustering (topology not preserved), locks respected.
+    Sloppy,
+}
+
+/// A group's simplified triangles, in the mesh's vertex ids.
+pub struct Simplified {
+    /// Triangle list into the welded mesh's vertices.
+    pub indices: Vec<u32>,
+    /// Object-space error meshopt reports for the collapse sequence.
+    pub error: f32,
+    /// The simplifier that reached the target.
+    pub method: Method,
+}
+
+/// Sloppy simplification estimates its error loosely; scale it (clusterlod does the same).
+const SLOPPY_ERROR_FACTOR: f32 = 2.0;
+
+/// Simplifies the triangle list `indices` (welded vertex ids) with every vertex for which
+/// `locked` is true kept in place. `None` when no simplifier gets below the stuck ratio.
+pub fn simplify_group(
+    mesh: &WeldedMesh,
+    indices: &[u32],
+    locked: impl Fn(u32) -> bool,
+    settings: &BakeSettings,
+) -> Option<Simplified> {
+    // Compact the group's vertices so that each group works on a small, local vertex array.
+    let mut vertices: Vec<u32> = indices.to_vec();
+    vertices.sort_unstable();
+    vertices.dedup();
+    let local: Vec<u32> = indices
+        .iter()
+        .map(|v| vertices.binary_search(v).unwrap_or(0) as u32)
+        .collect();
+    let positions: Vec<[f32; 3]> = vertices
+        .iter()
+        .map(|&v| mesh.positions[v as usize])
+        .collect();
+    let locks: Vec<bool> = vertices.iter().map(|&v| locked(v)).collect();
+    let (attributes, weights) = attributes(mesh, &vertices, settings);
+    let stride = weights.len() * 4;
+
+    let bytes = meshopt::typed_to_bytes(&positions);
+    let adapter = VertexDataAdapter::new(bytes, 12, 0).ok()?;
+    let triangles = indices.len() / 3;
+    let target = ((triangles as f32 * settings.simplify_ratio) as usize).max(1) * 3;
+    let limit = (triangles as f32 * settings.stuck_ratio) as usize;
+    let accept = |result: &[u32]| -> bool { result.len() / 3 <= limit && !result.is_empty() };
+    // Prune lets whole unlocked components (a far-away box, a leaf) vanish when their error
+    // allows, so that meshes of many disconnected parts still reach one root.
+    let base =
+        SimplifyOptions::LockBorder | SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune;
+
+    let border = EdgeCounts::border(mesh, indices);
+    for method in [
+        Method::Regular,
+        Method::Permissive,
+        Method::Prune,
+        Method::Sloppy,
+    ] {
+        let mut error = 0.0f32;
+        let result = match method {
+            Method::Regular if stride == 0 => meshopt::simplify_with_locks(
+                &local,
+                &adapter,
+                &locks,
+                target,
+                f32::MAX,
+                base,
+                Some(&mut error),
+            ),
+            Method::Regular => meshopt::simplify_with_attributes_and_locks(
+                &local,
+                &adapter,
+                &attributes,
+                &weights,
+                stride,
+                &locks,
+                target,
+                f32::MAX,
+                base,
+                Some(&mut error),
+            ),
+            // Without attributes there are no seams to relax.
+            Method::Permissive if stride == 0 => continue,
+            Method::Permissive => meshopt::simplify_with_attributes_and_locks(
+                &local,
+                &adapter,
+                &attributes,
+                &weights,
+                stride,
+                &locks,
+                target,
+                f32::MAX,
+                base | SimplifyOptions::Permissive,
+                Some(&mut error),
+            ),
+            Method::Prune => {
+                let (r, e) = prune_components(&local, &positions, &locks, &vertices, mesh, target);
+                error = e;
+                r
+            }
+            Method::Sloppy => {
+                let r = meshopt::simplify_sloppy_with_locks(
+                    &local,
+                    &adapter,
+                    &locks,
+                    target,
+                    f32::MAX,
+                    Some(&mut error),
+                );
+                // Sloppy error is relative to the group's extent.
+                error *= meshopt::simplify_scale(&adapter) * SLOPPY_ERROR_FACTOR;
+                r
+            }
+        };
+        // Back to mesh vertex ids, dropping triangles degenerate by position (sloppy makes them).
+        let mut out = Vec::with_capacity(result.len());
+        for t in result.chunks_exact(3) {
+            let g = [
+                vertices[t[0] as usize],
+                vertices[t[1] as usize],
+                vertices[t[2] as usize],
+            ];
+            let p = g.map(|v| mesh.position_ids[v as usize]);
+            if p[0] != p[1] && p[1] != p[2] && p[0] != p[2] {
+                out.extend_from_slice(&g);
+            }
+        }
+        if accept(&out) && error.is_finite() && border.preserved_by(mesh, &out) {
+            return Some(Simplified {
+                indices: out,
+                error,
+                method,
+            });
+        }
+    }
+    None
+}
+
+/// Edge use counts by position, to check that a simplified group keeps its border exactly
+/// and is manifold inside: the local form of the crack-freedom invariant.
+struct EdgeCounts {
+    /// Sorted (edge, uses) of the input's edges not used exactly twice.
+    border: Vec<(u64, u32)>,
+}
+
+fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
+    let mut keys: Vec<u64> = indices
+        .chunks_exact(3)
+        .flat_map(|t| {
+            (0..3).map(move |k| {
+                let a = mesh.position_ids[t[k] as usize];
+                let b = mesh.position_ids[t[(k + 1) % 3] as usize];
+                (a.min(b) as u64) << 32 | a.max(b) as u64
+            })
+        })
+        .collect();
+    keys.sort_unstable();
+    keys
+}
+
+impl EdgeCounts {
+    fn border(mesh: &WeldedMesh, indices: &[u32]) -> EdgeCounts {
+        let keys = edge_keys(mesh, indices);
+        let border = keys
+            .chunk_by(|a, b| a == b)
+            .filter(|r| r.len() != 2)
+            .map(|r| (r[0], r.len() as u32))
+            .collect();
+        EdgeCounts { border }
+    }
+
+    /// True if `out` uses every border edge as often as the input and every other edge twice.
+    fn preserved_by(&self, mesh: &WeldedMesh, out: &[u32]) -> bool {
+        let keys = edge_keys(mesh, out);
+        let mut matched = 0;
+        for run in keys.chunk_by(|a, b| a == b) {
+            match self.border.binary_search_by_key(&run[0], |e| e.0) {
+                Ok(i) if self.border[i].1 == run.len() as u32 => matched += 1,
+                Ok(_) => return false,
+                Err(_) if run.len() != 2 => return false,
+                Err(_) => {}
+            }
+        }
+        matched == self.border.len()
+    }
+}
+
+/// Per-vertex attribute rows (normal xyz, uv normalized to the mesh's UV range) and weights.
+fn attributes(
+    mesh: &WeldedMesh,
+    vertices: &[u32],
+    settings: &BakeSettings,
+) -> (Vec<f32>, Vec<f32>) {
+    let mut weights = Vec::new();
+    if mesh.normals.is_some() && settings.normal_weight > 0.0 {
+        weights.extend_from_slice(&[settings.normal_weight; 3]);
+    }
+    if mesh.uvs.is_some() && settings.uv_weight > 0.0 {
+        weights.extend_from_slice(&[settings.uv_weight; 2]);
+    }
+    let mut rows = Vec::with_capacity(vertices.len() * weights.len());
+    if weights.is_empty() {
+        return (rows, weights);
+    }
+    for &v in vertices {
+        if let (Some(n), true) = (&mesh.normals, settings.normal_weight > 0.0) {
+            rows.extend_from_slice(&n[v as usize]);
+        }
+        if let (Some(uv), true) = (&mesh.uvs, settings.uv_weight > 0.0) {
+            let t = uv[v as usize];
+            let scale = |k: usize| {
+                if mesh.uv.extent[k] > 0.0 {
+                    (t[k] - mesh.uv.min[k]) / mesh.uv.extent[k]
+                } else {
+                    0.0
+                }
+            };
+            rows.extend_from_slice(&[scale(0), scale(1)]);
+        }
+    }
+    (rows, weights)
+}
+
+/// Removes whole connected components without locked vertices, smallest first, until at most
+/// `target` indices remain. The error is the largest removed component's bounding diagonal:
+/// a part vanishes only once it projects below the threshold.
+fn prune_components(
+    local: &[u32],
+    positions: &[[f32; 3]],
+    locks: &[bool],
+    vertices: &[u32],
+    mesh: &WeldedMesh,
+    target: usize,
+) -> (Vec<u32>, f32) {
+    // Components by position: union vertices of each triangle, and vertices sharing a position.
+    let n = positions.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
+        }
+        x
+    }
+    let union = |parent: &mut Vec<u32>, a: u32, b: u32| {
+        let (ra, rb) = (find(parent, a), find(parent, b));
+        if ra != rb {
+            parent[ra.max(rb) as usize] = ra.min(rb);
+        }
+    };
+    for t in local.chunks_exact(3) {
+        union(&mut parent, t[0], t[1]);
+        union(&mut parent, t[1], t[2]);
+    }
+    let mut by_position: Vec<(u32, u32)> = (0..n as u32)
+        .map(|v| (mesh.position_ids[vertices[v as usize] as usize], v))
+        .collect();
+    by_position.sort_unstable();
+    for run in by_position.chunk_by(|a, b| a.0 == b.0) {
+        for w in run.windows(2) {
+            union(&mut parent, w[0].1, w[1].1);
+        }
+    }
+    let root: Vec<u32> = (0..n as u32).map(|v| find(&mut parent, v)).collect();
+    // Per component: bounds, triangle count, locked.
+    let mut lo = vec![[f32::INFINITY; 3]; n];
+    let mut hi = vec![[f32::NEG_INFINITY; 3]; n];
+    let mut locked = vec![false; n];
+    let mut triangles = vec![0usize; n];
+    for v in 0..n {
+        let r = root[v] as usize;
+        for k in 0..3 {
+            lo[r][k] = lo[r][k].min(positions[v][k]);
+            hi[r][k] = hi[r][k].max(positions[v][k]);
+        }
+        locked[r] |= locks[v];
+    }
+    for t in local.chunks_exact(3) {
+        triangles[root[t[0] as usize] as usize] += 1;
+    }
+    let diagonal = |r: usize| {
+        ((hi[r][0] - lo[r][0]).powi(2)
+            + (hi[r][1] - lo[r][1]).powi(2)
+            + (hi[r][2] - lo[r][2]).powi(2))
+        .sqrt()
+    };
+    let mut candidates: Vec<usize> = (0..n).filter(|&r| triangles[r] > 0 && !locked[r]).collect();
+    candidates.sort_by(|&a, &b| diagonal(a).total_cmp(&diagonal(b)).then(a.cmp(&b)));
+    let mut removed = vec![false; n];
+    let mut remaining = local.len();
+    let mut error = 0.0f32;
+    for r in candidates {
+        // Keep at least one component: a group never vanishes entirely.
+        if remaining <= target || remaining == triangles[r] * 3 {
+            break;
+        }
+        removed[r] = true;
+        remaining -= triangles[r] * 3;
+        error = error.max(diagonal(r));
+    }
+    let kept = local
+        .chunks_exact(3)
+        .filter(|t| !removed[root[t[0] as usize] as usize])
+        .flatten()
+        .copied()
+        .collect();
+    (kept, error)
+}

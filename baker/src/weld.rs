@@ -1,0 +1,195 @@
+//! Weld: quantize positions to the global grid and merge vertices that are equal in every
+//! attribute (position, normal, UV, material). Vertices equal in position only stay apart
+//! (attribute seams) but share a *position id*, which is what locking and crack checks use.
+
+use crate::settings::BakeSettings;
+use formats::mres::{Grid, UvQuant};
+use formats::SourceMesh;
+use rustc_hash::FxHashMap as HashMap;
+
+/// A welded, quantized mesh: the input of the DAG build.
+pub struct WeldedMesh {
+    /// The global grid.
+    pub grid: Grid,
+    /// UV quantization (identity-like when the mesh has no UVs).
+    pub uv: UvQuant,
+    /// Grid coordinates per vertex.
+    pub grid_positions: Vec<[i32; 3]>,
+    /// Decoded (snapped) position per vertex: what simplification sees.
+    pub positions: Vec<[f32; 3]>,
+    /// Position id per vertex: vertices at the same grid point share it.
+    pub position_ids: Vec<u32>,
+    /// Number of distinct position ids.
+    pub position_count: usize,
+    /// Unit normals per vertex, if kept.
+    pub normals: Option<Vec<[f32; 3]>>,
+    /// UVs per vertex, if kept.
+    pub uvs: Option<Vec<[f32; 2]>>,
+    /// Material per vertex (a vertex never spans two materials).
+    pub materials: Vec<u32>,
+    /// Whether more than one material occurs.
+    pub multi_material: bool,
+    /// Triangle list into the vertex arrays.
+    pub indices: Vec<u32>,
+    /// Triangles dropped because they became degenerate on the grid (plus the importer's).
+    pub degenerate_dropped: u64,
+    /// Triangles of the source.
+    pub source_triangles: u64,
+}
+
+/// Welds `mesh` on a grid of `settings.position_bits` over its bounds. `None` if the mesh is
+/// empty.
+pub fn weld(mesh: &SourceMesh, settings: &BakeSettings) -> Option<WeldedMesh> {
+    let (lo, hi) = mesh.bounds()?;
+    let grid = Grid::covering(lo, hi, settings.position_bits);
+    let normals = mesh.normals.as_ref().filter(|_| settings.keep_normals);
+    let uvs = mesh.uvs.as_ref().filter(|_| settings.keep_uvs);
+    let uv = uv_quant(uvs.map(|v| v.as_slice()).unwrap_or(&[]));
+
+    let mut out = WeldedMesh {
+        grid,
+        uv,
+        grid_positions: Vec::new(),
+        positions: Vec::new(),
+        position_ids: Vec::new(),
+        position_count: 0,
+        normals: normals.map(|_| Vec::new()),
+        uvs: uvs.map(|_| Vec::new()),
+        materials: Vec::new(),
+        multi_material: false,
+        indices: Vec::with_capacity(mesh.indices.len()),
+        degenerate_dropped: mesh.degenerate_dropped,
+        source_triangles: mesh.triangle_count() as u64 + mesh.degenerate_dropped,
+    };
+    // Key: grid point, quantized attributes, material. Attributes are compared after
+    // quantization so that vertices that encode identically also weld.
+    let mut vertex_of: HashMap<([i32; 3], [u32; 2], [u16; 2], u32), u32> = HashMap::default();
+    let mut position_of: HashMap<[i32; 3], u32> = HashMap::default();
+    // Source vertex → welded vertex for the material it was first seen with; the rare
+    // vertices shared by several materials go through `vertex_of` each time.
+    let mut source_to_vertex: Vec<(u32, u32)> = vec![(u32::MAX, 0); mesh.positions.len()];
+    let first_material = mesh.materials.first().copied().unwrap_or(0);
+    for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
+        let material = mesh.materials.get(t).copied().unwrap_or(0);
+        out.multi_material |= material != first_material;
+        let mut welded = [0u32; 3];
+        for (k, &src) in tri.iter().enumerate() {
+            let s = src as usize;
+            if source_to_vertex[s].0 == material {
+                welded[k] = source_to_vertex[s].1;
+                continue;
+            }
+            welded[k] = {
+                let q = grid.quantize(mesh.positions[s]);
+                let n = normals
+                    .map(|n| formats::mres::bits::oct_encode(n[s], settings.normal_bits))
+                    .unwrap_or([0; 2]);
+                let t = uvs.map(|u| uv.quantize(u[s])).unwrap_or([0; 2]);
+                let next = out.grid_positions.len() as u32;
+                *vertex_of.entry((q, n, t, material)).or_insert_with(|| {
+                    let fresh = position_of.len() as u32;
+                    let pid = *position_of.entry(q).or_insert(fresh);
+                    out.grid_positions.push(q);
+                    out.positions.push(grid.decode(q));
+                    out.position_ids.push(pid);
+                    if let (Some(dst), Some(src)) = (out.normals.as_mut(), normals) {
+                        dst.push(src[s]);
+                    }
+                    if let (Some(dst), Some(src)) = (out.uvs.as_mut(), uvs) {
+                        dst.push(src[s]);
+                    }
+                    out.materials.push(material);
+                    next
+                })
+            };
+            if source_to_vertex[s].0 == u32::MAX {
+                source_to_vertex[s] = (material, welded[k]);
+            }
+        }
+        let p = welded.map(|v| out.position_ids[v as usize]);
+        if p[0] == p[1] || p[1] == p[2] || p[0] == p[2] {
+            out.degenerate_dropped += 1;
+            continue;
+        }
+        out.indices.extend_from_slice(&welded);
+    }
+    out.position_count = position_of.len();
+    Some(out)
+}
+
+fn uv_quant(uvs: &[[f32; 2]]) -> UvQuant {
+    let mut min = [f32::INFINITY; 2];
+    let mut max = [f32::NEG_INFINITY; 2];
+    for uv in uvs {
+        for k in 0..2 {
+            min[k] = min[k].min(uv[k]);
+            max[k] = max[k].max(uv[k]);
+        }
+    }
+    if uvs.is_empty() {
+        return UvQuant {
+            min: [0.0; 2],
+            extent: [0.0; 2],
+        };
+    }
+    UvQuant {
+        min,
+        extent: [max[0] - min[0], max[1] - min[1]],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seams_stay_apart_but_share_position_ids() {
+        // Two triangles sharing an edge, with different UVs on the shared vertices.
+        let mesh = SourceMesh {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+            ],
+            uvs: Some(vec![
+                [0.0, 0.0],
+                [0.5, 0.0],
+                [0.0, 0.5],
+                [0.6, 0.0],
+                [0.0, 0.6],
+                [1.0, 1.0],
+            ]),
+            normals: None,
+            indices: vec![0, 1, 2, 3, 5, 4],
+            materials: vec![0, 0],
+            degenerate_dropped: 0,
+        };
+        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        assert_eq!(w.grid_positions.len(), 6);
+        assert_eq!(w.position_count, 4);
+        assert_eq!(w.position_ids[1], w.position_ids[3]);
+    }
+
+    #[test]
+    fn duplicates_weld_and_grid_degenerates_drop() {
+        let mesh = SourceMesh {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1e-9, 0.0, 0.0],
+            ],
+            indices: vec![0, 1, 2, 3, 2, 0, 0, 4, 2],
+            materials: vec![0, 0, 0],
+            ..Default::default()
+        };
+        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        assert_eq!(w.grid_positions.len(), 3);
+        assert_eq!(w.indices.len(), 6);
+        assert_eq!(w.degenerate_dropped, 1);
+    }
+}

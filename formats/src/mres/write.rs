@@ -1,0 +1,491 @@
+//! Writer: a logical [`Dag`] to `.mres` bytes (FORMAT.md). Deterministic: the same `Dag`
+//! always gives the same bytes.
+
+use super::bits::{bits_for, oct_encode, BitWriter};
+use super::*;
+use rayon::prelude::*;
+
+/// Why a [`Dag`] cannot be written.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    /// A cluster breaks a format limit.
+    #[error("cluster {cluster}: {problem}")]
+    BadCluster {
+        /// Index into `Dag::clusters`.
+        cluster: usize,
+        /// What is wrong.
+        problem: String,
+    },
+    /// A group or reference is inconsistent.
+    #[error("{0}")]
+    BadDag(String),
+    /// zstd failed.
+    #[error("zstd: {0}")]
+    Compress(#[from] std::io::Error),
+}
+
+/// Serializes `dag` to a complete `.mres` file; pages are compressed with zstd at `level`.
+pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
+    let layout = Layout::new(dag)?;
+    let header_flags = dag.header.flags;
+    let encoded: Vec<EncodedCluster> = layout
+        .cluster_order
+        .iter()
+        .map(|&c| encode_cluster(&dag.clusters[c], &dag.header, header_flags, c))
+        .collect::<Result<_, _>>()?;
+    let pages = pack_pages(&layout, &encoded);
+
+    // Renumbered hierarchy.
+    let mut groups = Vec::with_capacity(dag.groups.len());
+    let mut clusters = Vec::with_capacity(dag.clusters.len());
+    let mut page_offsets = vec![0u32; dag.clusters.len()];
+    for page in &pages {
+        for (c, offset) in page.cluster_offsets.iter().enumerate() {
+            page_offsets[page.first_cluster as usize + c] = *offset;
+        }
+    }
+    for (new_g, &old_g) in layout.group_order.iter().enumerate() {
+        let g = &dag.groups[old_g];
+        let (first, count) = layout.group_ranges[new_g];
+        groups.push(Group {
+            first_cluster: first,
+            cluster_count: count,
+            page: layout.group_page(&pages, new_g),
+            ..*g
+        });
+    }
+    for (new_c, &old_c) in layout.cluster_order.iter().enumerate() {
+        let c = &dag.clusters[old_c];
+        clusters.push(ClusterInfo {
+            group: layout.group_new[c.group as usize],
+            own_group: if c.own_group == NO_GROUP {
+                NO_GROUP
+            } else {
+                layout.group_new[c.own_group as usize]
+            },
+            vertex_count: c.positions.len() as u16,
+            triangle_count: (c.indices.len() / 3) as u16,
+            page_offset: page_offsets[new_c],
+        });
+    }
+    let dependencies = page_dependencies(&pages, &groups, &clusters);
+
+    let frames: Vec<Vec<u8>> = pages
+        .par_iter()
+        .map(|p| compress_page(p, level))
+        .collect::<Result<_, _>>()?;
+
+    let mut hierarchy = Vec::new();
+    for g in &groups {
+        put_f32s(&mut hierarchy, &g.sphere.center);
+        put_f32s(&mut hierarchy, &[g.sphere.radius, g.error]);
+        for v in [g.level, g.first_cluster, g.cluster_count, g.page, 0] {
+            hierarchy.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    for c in &clusters {
+        hierarchy.extend_from_slice(&c.group.to_le_bytes());
+        hierarchy.extend_from_slice(&c.own_group.to_le_bytes());
+        hierarchy.extend_from_slice(&c.vertex_count.to_le_bytes());
+        hierarchy.extend_from_slice(&c.triangle_count.to_le_bytes());
+        hierarchy.extend_from_slice(&c.page_offset.to_le_bytes());
+    }
+
+    let hierarchy_offset = HEADER_SIZE as u64;
+    let page_table_offset = hierarchy_offset + hierarchy.len() as u64;
+    let dep_total: usize = dependencies.iter().map(Vec::len).sum();
+    let page_table_size = (pages.len() * PAGE_RECORD_SIZE + dep_total * 4) as u64;
+    let mut offset = page_table_offset + page_table_size;
+    let mut table = Vec::new();
+    let mut dep_first = 0u32;
+    for ((page, frame), deps) in pages.iter().zip(&frames).zip(&dependencies) {
+        table.extend_from_slice(&offset.to_le_bytes());
+        table.extend_from_slice(&(frame.len() as u32).to_le_bytes());
+        table.extend_from_slice(&(page.raw.len() as u32).to_le_bytes());
+        table.extend_from_slice(blake3::hash(frame).as_bytes());
+        for v in [
+            page.first_cluster,
+            page.cluster_count,
+            page.first_group,
+            page.group_count,
+            dep_first,
+            deps.len() as u32,
+        ] {
+            table.extend_from_slice(&v.to_le_bytes());
+        }
+        dep_first += deps.len() as u32;
+        offset += frame.len() as u64;
+    }
+    for d in dependencies.iter().flatten() {
+        table.extend_from_slice(&d.to_le_bytes());
+    }
+
+    let level_count = groups.iter().map(|g| g.level + 1).max().unwrap_or(0);
+    let h = &dag.header;
+    let mut out = Vec::with_capacity(offset as usize);
+    out.extend_from_slice(&MAGIC);
+    for v in [VERSION, HEADER_SIZE as u32, h.flags] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    put_f32s(&mut out, &h.grid.origin);
+    put_f32s(&mut out, &[h.grid.step]);
+    put_f32s(&mut out, &h.uv.min);
+    put_f32s(&mut out, &h.uv.extent);
+    for v in [
+        h.normal_bits,
+        h.position_bits,
+        level_count,
+        groups.len() as u32,
+        clusters.len() as u32,
+        pages.len() as u32,
+    ] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    for v in [
+        h.source_triangles,
+        hierarchy_offset,
+        hierarchy.len() as u64,
+        page_table_offset,
+        page_table_size,
+    ] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    debug_assert_eq!(out.len(), 112);
+    let checksum = meta_checksum(&out, &hierarchy, &table);
+    out.extend_from_slice(&checksum);
+    out.resize(HEADER_SIZE, 0);
+    out.extend_from_slice(&hierarchy);
+    out.extend_from_slice(&table);
+    for frame in &frames {
+        out.extend_from_slice(frame);
+    }
+    Ok(out)
+}
+
+/// blake3 over the first 112 header bytes, the hierarchy section and the page table.
+pub(crate) fn meta_checksum(header: &[u8], hierarchy: &[u8], table: &[u8]) -> [u8; 32] {
+    let mut hasher = blake3::Hasher::new();
+    hasher.update(&header[..112]);
+    hasher.update(hierarchy);
+    hasher.update(table);
+    *hasher.finalize().as_bytes()
+}
+
+fn put_f32s(out: &mut Vec<u8>, values: &[f32]) {
+    for v in values {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// The coarse-to-fine order of groups and clusters.
+struct Layout {
+    /// New group index → old.
+    group_order: Vec<usize>,
+    /// Old group index → new.
+    group_new: Vec<u32>,
+    /// New cluster index → old.
+    cluster_order: Vec<usize>,
+    /// Per new group: (first cluster, count).
+    group_ranges: Vec<(u32, u32)>,
+}
+
+impl Layout {
+    fn new(dag: &Dag) -> Result<Layout, WriteError> {
+        let n = dag.groups.len();
+        let mut members: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for (i, c) in dag.clusters.iter().enumerate() {
+            let g = c.group as usize;
+            if g >= n || (c.own_group != NO_GROUP && c.own_group as usize >= n) {
+                return Err(WriteError::BadDag(format!(
+                    "cluster {i} refers to a missing group"
+                )));
+            }
+            members[g].push(i);
+        }
+        let mut group_order: Vec<usize> = (0..n).collect();
+        // Coarse to fine: a prefix of the file is a valid coarse model.
+        group_order.sort_by_key(|&g| (std::cmp::Reverse(dag.groups[g].level), g));
+        let mut group_new = vec![0u32; n];
+        let mut cluster_order = Vec::with_capacity(dag.clusters.len());
+        let mut group_ranges = Vec::with_capacity(n);
+        for (new_g, &g) in group_order.iter().enumerate() {
+            if members[g].is_empty() {
+                return Err(WriteError::BadDag(format!("group {g} has no clusters")));
+            }
+            group_new[g] = new_g as u32;
+            group_ranges.push((cluster_order.len() as u32, members[g].len() as u32));
+            cluster_order.extend_from_slice(&members[g]);
+        }
+        Ok(Layout {
+            group_order,
+            group_new,
+            cluster_order,
+            group_ranges,
+        })
+    }
+
+    fn group_page(&self, pages: &[PageBuild], new_g: usize) -> u32 {
+        let g = new_g as u32;
+        pages.partition_point(|p| p.first_group + p.group_count <= g) as u32
+    }
+}
+
+/// Compresses a page as one zstd frame per section (headers, then each block kind), so that
+/// each section gets its own entropy tables: in one frame, zstd's 128 KiB blocks would make
+/// the well-compressing indices share tables with the near-random bit-packed positions.
+fn compress_page(page: &PageBuild, level: i32) -> std::io::Result<Vec<u8>> {
+    let mut out = Vec::new();
+    for w in page.sections.windows(2) {
+        if w[1] > w[0] {
+            out.extend_from_slice(&zstd::bulk::compress(&page.raw[w[0]..w[1]], level)?);
+        }
+    }
+    Ok(out)
+}
+
+struct PageBuild {
+    raw: Vec<u8>,
+    /// Section boundaries in `raw`: 0, end of headers, end of each block kind.
+    sections: Vec<usize>,
+    first_cluster: u32,
+    cluster_count: u32,
+    first_group: u32,
+    group_count: u32,
+    /// Offset of each cluster's header within `raw`.
+    cluster_offsets: Vec<u32>,
+}
+
+/// Greedily fills pages with whole groups in coarse-to-fine order.
+fn pack_pages(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageBuild> {
+    let mut pages = Vec::new();
+    let mut start_group = 0usize;
+    while start_group < layout.group_ranges.len() {
+        let mut end_group = start_group;
+        let mut size = 0usize;
+        while end_group < layout.group_ranges.len() {
+            let (first, count) = layout.group_ranges[end_group];
+            let group_size: usize = (first..first + count)
+                .map(|c| encoded[c as usize].size())
+                .sum();
+            if end_group > start_group && size + group_size > PAGE_TARGET_RAW_SIZE {
+                break;
+            }
+            size += group_size;
+            end_group += 1;
+        }
+        let first_cluster = layout.group_ranges[start_group].0;
+        let (last_first, last_count) = layout.group_ranges[end_group - 1];
+        let cluster_count = last_first + last_count - first_cluster;
+        pages.push(assemble_page(
+            &encoded[first_cluster as usize..(first_cluster + cluster_count) as usize],
+            first_cluster,
+            start_group as u32,
+            (end_group - start_group) as u32,
+        ));
+        start_group = end_group;
+    }
+    pages
+}
+
+/// Lays out a page: all cluster headers first, then the data blocks grouped by kind (every
+/// cluster's positions, then every cluster's normals, UVs, indices, materials), so that zstd
+/// sees like data together. Header offsets are rebased from cluster-relative to page-relative.
+fn assemble_page(
+    clusters: &[EncodedCluster],
+    first_cluster: u32,
+    first_group: u32,
+    group_count: u32,
+) -> PageBuild {
+    let mut raw = vec![0u8; clusters.len() * CLUSTER_HEADER_SIZE];
+    let mut headers: Vec<[u8; CLUSTER_HEADER_SIZE]> = clusters.iter().map(|c| c.header).collect();
+    let mut sections = vec![0, raw.len()];
+    for slot in 0..BLOCK_KINDS {
+        for (c, header) in clusters.iter().zip(&mut headers) {
+            if let Some(block) = &c.blocks[slot] {
+                let at = 20 + slot * 4;
+                header[at..at + 4].copy_from_slice(&(raw.len() as u32).to_le_bytes());
+                raw.extend_from_slice(block);
+                raw.resize(raw.len().next_multiple_of(4), 0);
+            }
+        }
+        sections.push(raw.len());
+    }
+    let mut cluster_offsets = Vec::with_capacity(clusters.len());
+    for (i, header) in headers.iter().enumerate() {
+        let at = i * CLUSTER_HEADER_SIZE;
+        raw[at..at + CLUSTER_HEADER_SIZE].copy_from_slice(header);
+        cluster_offsets.push(at as u32);
+    }
+    PageBuild {
+        raw,
+        sections,
+        first_cluster,
+        cluster_count: clusters.len() as u32,
+        first_group,
+        group_count,
+        cluster_offsets,
+    }
+}
+
+/// Data block kinds, in page order: positions, normals, UVs, indices, materials.
+const BLOCK_KINDS: usize = 5;
+
+/// One cluster's header (offsets not yet set) and data blocks.
+struct EncodedCluster {
+    header: [u8; CLUSTER_HEADER_SIZE],
+    blocks: [Option<Vec<u8>>; BLOCK_KINDS],
+}
+
+impl EncodedCluster {
+    fn size(&self) -> usize {
+        CLUSTER_HEADER_SIZE
+            + self
+                .blocks
+                .iter()
+                .flatten()
+                .map(|b| b.len().next_multiple_of(4))
+                .sum::<usize>()
+    }
+}
+
+/// Encodes one cluster: its header (block offsets filled in by [`assemble_page`]) and blocks.
+fn encode_cluster(
+    c: &DagCluster,
+    h: &Header,
+    flags: u32,
+    index: usize,
+) -> Result<EncodedCluster, WriteError> {
+    let bad = |problem: String| WriteError::BadCluster {
+        cluster: index,
+        problem,
+    };
+    let vertex_count = c.positions.len();
+    let triangle_count = c.indices.len() / 3;
+    if vertex_count == 0 || vertex_count > MAX_CLUSTER_VERTICES {
+        return Err(bad(format!("{vertex_count} vertices (1..=256 allowed)")));
+    }
+    if triangle_count == 0 || triangle_count > MAX_CLUSTER_TRIANGLES || c.indices.len() % 3 != 0 {
+        return Err(bad(format!(
+            "{} indices (3..=384, multiple of 3)",
+            c.indices.len()
+        )));
+    }
+    if let Some(i) = c.indices.iter().find(|&&i| i as usize >= vertex_count) {
+        return Err(bad(format!("index {i} out of {vertex_count} vertices")));
+    }
+    let with = |flag: u32, len: usize, per: usize| (flags & flag == 0) || len == per;
+    if !with(FLAG_NORMALS, c.normals.len(), vertex_count)
+        || !with(FLAG_UVS, c.uvs.len(), vertex_count)
+        || !with(FLAG_MATERIALS, c.materials.len(), triangle_count)
+    {
+        return Err(bad(
+            "attribute count does not match the vertex/triangle count".into(),
+        ));
+    }
+
+    let mut header = [0u8; CLUSTER_HEADER_SIZE];
+    header[0..2].copy_from_slice(&(vertex_count as u16).to_le_bytes());
+    header[2..4].copy_from_slice(&(triangle_count as u16).to_le_bytes());
+    let mut blocks: [Option<Vec<u8>>; BLOCK_KINDS] = Default::default();
+
+    let (lo, bits, packed) = pack_ranges(c.positions.iter().map(|p| p.map(|v| v as i64)));
+    for k in 0..3 {
+        header[4 + k * 4..8 + k * 4].copy_from_slice(&(lo[k] as i32).to_le_bytes());
+        header[16 + k] = bits[k] as u8;
+    }
+    blocks[0] = Some(packed);
+    if flags & FLAG_NORMALS != 0 {
+        let (lo, bits, packed) = pack_ranges(
+            c.normals
+                .iter()
+                .map(|n| oct_encode(*n, h.normal_bits).map(|v| v as i64)),
+        );
+        header[40..42].copy_from_slice(&(lo[0] as u16).to_le_bytes());
+        header[42..44].copy_from_slice(&(lo[1] as u16).to_le_bytes());
+        header[44] = bits[0] as u8;
+        header[45] = bits[1] as u8;
+        blocks[1] = Some(packed);
+    }
+    if flags & FLAG_UVS != 0 {
+        blocks[2] = Some(
+            c.uvs
+                .iter()
+                .flat_map(|uv| h.uv.quantize(*uv))
+                .flat_map(u16::to_le_bytes)
+                .collect(),
+        );
+    }
+    blocks[3] = Some(c.indices.clone());
+    if flags & FLAG_MATERIALS != 0 {
+        blocks[4] = Some(c.materials.iter().flat_map(|m| m.to_le_bytes()).collect());
+    }
+    Ok(EncodedCluster { header, blocks })
+}
+
+/// Packs N-component integer vectors as offsets from their per-component minimum, each
+/// component with the fewest bits that hold its range. Returns (minimum, bits, packed bytes).
+fn pack_ranges<const N: usize>(
+    values: impl Iterator<Item = [i64; N]> + Clone,
+) -> ([i64; N], [u32; N], Vec<u8>) {
+    let mut lo = [i64::MAX; N];
+    let mut hi = [i64::MIN; N];
+    for v in values.clone() {
+        for k in 0..N {
+            lo[k] = lo[k].min(v[k]);
+            hi[k] = hi[k].max(v[k]);
+        }
+    }
+    let bits: [u32; N] = std::array::from_fn(|k| bits_for((hi[k] - lo[k]) as u32));
+    let mut w = BitWriter::default();
+    for v in values {
+        for k in 0..N {
+            w.push((v[k] - lo[k]) as u32, bits[k]);
+        }
+    }
+    (lo, bits, words_to_bytes(&w.finish()))
+}
+
+fn words_to_bytes(words: &[u32]) -> Vec<u8> {
+    words.iter().flat_map(|w| w.to_le_bytes()).collect()
+}
+
+/// Per page, the other pages it depends on: those holding its clusters' parents (the clusters
+/// produced by its groups) and those holding their siblings (produced by the same group).
+fn page_dependencies(
+    pages: &[PageBuild],
+    groups: &[Group],
+    clusters: &[ClusterInfo],
+) -> Vec<Vec<u32>> {
+    // Pages holding the output of each group.
+    let mut output_pages: Vec<Vec<u32>> = vec![Vec::new(); groups.len()];
+    for c in clusters {
+        if c.own_group != NO_GROUP {
+            output_pages[c.own_group as usize].push(groups[c.group as usize].page);
+        }
+    }
+    for p in &mut output_pages {
+        p.sort_unstable();
+        p.dedup();
+    }
+    pages
+        .iter()
+        .enumerate()
+        .map(|(i, page)| {
+            let mut deps = Vec::new();
+            let groups_here = page.first_group..page.first_group + page.group_count;
+            for g in groups_here {
+                deps.extend_from_slice(&output_pages[g as usize]);
+            }
+            for c in page.first_cluster..page.first_cluster + page.cluster_count {
+                let own = clusters[c as usize].own_group;
+                if own != NO_GROUP {
+                    deps.extend_from_slice(&output_pages[own as usize]);
+                }
+            }
+            deps.sort_unstable();
+            deps.dedup();
+            deps.retain(|&d| d as usize != i);
+            deps
+        })
+        .collect()
+}
