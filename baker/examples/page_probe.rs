@@ -7,8 +7,7 @@ fn main() {
         let info = &f.pages[p as usize];
         let c0 = &f.clusters[info.first_cluster as usize];
         let h = &raw[c0.page_offset as usize..c0.page_offset as usize + 48];
-        let off =
-            |i: usize| u32::from_le_bytes(h[20 + i * 4..24 + i * 4].try_into().unwrap()) as usize;
+        let off = |i: usize| u32::from_le_bytes(h[20 + i * 4..24 + i * 4].try_into().unwrap()) as usize;
         let idx = off(3);
         let z = |b: &[u8]| zstd::bulk::compress(b, 9).unwrap().len();
         println!(

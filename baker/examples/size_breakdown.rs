@@ -10,20 +10,12 @@ fn main() {
             let ci = &f.clusters[c as usize];
             let h = &raw[ci.page_offset as usize..ci.page_offset as usize + 48];
             cats[0].extend_from_slice(h);
-            let off = |i: usize| {
-                u32::from_le_bytes(h[20 + i * 4..24 + i * 4].try_into().unwrap()) as usize
-            };
+            let off = |i: usize| u32::from_le_bytes(h[20 + i * 4..24 + i * 4].try_into().unwrap()) as usize;
             let vc = ci.vertex_count as usize;
             let tc = ci.triangle_count as usize;
             let pb = (h[16] + h[17] + h[18]) as usize;
             let nb = (h[44] + h[45]) as usize;
-            let lens = [
-                (vc * pb).div_ceil(32) * 4,
-                (vc * nb).div_ceil(32) * 4,
-                vc * 4,
-                tc * 3,
-                tc * 2,
-            ];
+            let lens = [(vc * pb).div_ceil(32) * 4, (vc * nb).div_ceil(32) * 4, vc * 4, tc * 3, tc * 2];
             for i in 0..5 {
                 if off(i) != 0 {
                     cats[i + 1].extend_from_slice(&raw[off(i)..off(i) + lens[i]]);
@@ -31,14 +23,7 @@ fn main() {
             }
         }
     }
-    let names = [
-        "headers",
-        "positions",
-        "normals",
-        "uvs",
-        "indices",
-        "materials",
-    ];
+    let names = ["headers", "positions", "normals", "uvs", "indices", "materials"];
     let tris = f.header.source_triangles as f64;
     for (n, c) in names.iter().zip(&cats) {
         let z = zstd::bulk::compress(c, 9).unwrap().len();
@@ -50,11 +35,7 @@ fn main() {
             z as f64 / tri_or(tris)
         );
     }
-    println!(
-        "file {} ({:.2} B/tri)",
-        f.file_size(),
-        f.file_size() as f64 / tris
-    );
+    println!("file {} ({:.2} B/tri)", f.file_size(), f.file_size() as f64 / tris);
 }
 fn tri_or(t: f64) -> f64 {
     t.max(1.0)

@@ -90,11 +90,7 @@ pub fn bake_mesh(mesh: SourceMesh, settings: &BakeSettings) -> Result<Baked, Bak
     drop(welded);
     let bytes = formats::mres::write_mres(&dag, settings.zstd_level)?;
     Ok(Baked {
-        stats: BakeStats {
-            bytes: bytes.len() as u64,
-            build_seconds: start.elapsed().as_secs_f64(),
-            ..stats
-        },
+        stats: BakeStats { bytes: bytes.len() as u64, build_seconds: start.elapsed().as_secs_f64(), ..stats },
         bytes,
     })
 }

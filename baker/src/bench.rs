@@ -47,9 +47,8 @@ pub fn peak_rss() -> u64 {
 }
 
 fn diagonal(mesh: &SourceMesh) -> f32 {
-    mesh.bounds().map_or(0.0, |(lo, hi)| {
-        ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2) + (hi[2] - lo[2]).powi(2)).sqrt()
-    })
+    mesh.bounds()
+        .map_or(0.0, |(lo, hi)| ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2) + (hi[2] - lo[2]).powi(2)).sqrt())
 }
 
 /// Runs our builder.
@@ -60,16 +59,8 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
     let baked = bake_mesh(mesh, settings)?;
     let seconds = start.elapsed().as_secs_f64();
     let file = MresFile::parse(baked.bytes)?;
-    let tri = |cut: Vec<u32>| {
-        cut.iter()
-            .map(|&c| file.clusters[c as usize].triangle_count as u64)
-            .sum()
-    };
-    let level0: Vec<_> = file
-        .clusters
-        .iter()
-        .filter(|c| c.own_group == formats::mres::NO_GROUP)
-        .collect();
+    let tri = |cut: Vec<u32>| cut.iter().map(|&c| file.clusters[c as usize].triangle_count as u64).sum();
+    let level0: Vec<_> = file.clusters.iter().filter(|c| c.own_group == formats::mres::NO_GROUP).collect();
     Ok(BuilderRun {
         builder: "mres".into(),
         seconds,
@@ -77,8 +68,7 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
         input_triangles,
         levels: file.header.level_count,
         root_clusters: baked.stats.build.root_clusters,
-        level0_fill: level0.iter().map(|c| c.triangle_count as f64).sum::<f64>()
-            / level0.len().max(1) as f64,
+        level0_fill: level0.iter().map(|c| c.triangle_count as f64).sum::<f64>() / level0.len().max(1) as f64,
         cut_triangles: CUT_THRESHOLDS
             .iter()
             .map(|t| tri(select::uniform_cut(&file.groups, &file.clusters, t * diag)))
@@ -105,9 +95,8 @@ pub fn run_clusterlod(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Resu
         weights.extend_from_slice(&[settings.uv_weight; 2]);
         attributes.push(uv.iter().map(|v| v.to_vec()).collect::<Vec<_>>());
     }
-    let rows: Vec<f32> = (0..mesh.positions.len())
-        .flat_map(|v| attributes.iter().flat_map(move |a| a[v].clone()))
-        .collect();
+    let rows: Vec<f32> =
+        (0..mesh.positions.len()).flat_map(|v| attributes.iter().flat_map(move |a| a[v].clone())).collect();
     drop(attributes);
     let mut clod_mesh = ClodMesh::new(&mesh.indices, &adapter);
     if !weights.is_empty() {
@@ -122,10 +111,7 @@ pub fn run_clusterlod(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Resu
     clod_build(config, &clod_mesh, |group, out| {
         let id = groups.len();
         groups.push((group.depth, group.simplified.error));
-        clusters.extend(
-            out.iter()
-                .map(|c| (id, c.refined, (c.indices.len() / 3) as u32)),
-        );
+        clusters.extend(out.iter().map(|c| (id, c.refined, (c.indices.len() / 3) as u32)));
         id as i32
     });
     let seconds = start.elapsed().as_secs_f64();
@@ -133,11 +119,7 @@ pub fn run_clusterlod(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Resu
         clusters
             .iter()
             .filter(|(g, refined, _)| {
-                let own = if *refined < 0 {
-                    0.0
-                } else {
-                    groups[*refined as usize].1
-                };
+                let own = if *refined < 0 { 0.0 } else { groups[*refined as usize].1 };
                 own <= t && t < groups[*g].1
             })
             .map(|c| c.2 as u64)
@@ -150,10 +132,7 @@ pub fn run_clusterlod(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Resu
         peak_rss_bytes: peak_rss(),
         input_triangles,
         levels: groups.iter().map(|g| g.0 + 1).max().unwrap_or(0) as u32,
-        root_clusters: clusters
-            .iter()
-            .filter(|c| groups[c.0].1 == f32::MAX)
-            .count() as u64,
+        root_clusters: clusters.iter().filter(|c| groups[c.0].1 == f32::MAX).count() as u64,
         level0_fill: level0.iter().map(|c| c.2 as f64).sum::<f64>() / level0.len().max(1) as f64,
         cut_triangles: CUT_THRESHOLDS.iter().map(|t| cut(t * diag)).collect(),
         bytes: 0,

@@ -21,40 +21,13 @@ pub fn split(indices: &[u32], positions: &[[f32; 3]], settings: &BakeSettings) -
     };
     let max_t = settings.max_triangles as usize;
     let meshlets = match std::env::var("MRES_BUILDER").as_deref() {
-        Ok("greedy") => meshopt::build_meshlets(
-            indices,
-            &adapter,
-            settings.max_vertices as usize,
-            max_t,
-            0.0,
-        ),
-        Ok("flex") => meshopt::build_meshlets_flex(
-            indices,
-            &adapter,
-            settings.max_vertices as usize,
-            max_t / 2,
-            max_t,
-            0.0,
-            0.0,
-        ),
-        _ => meshopt::build_meshlets_spatial(
-            indices,
-            &adapter,
-            settings.max_vertices as usize,
-            max_t / 4,
-            max_t,
-            0.5,
-        ),
+        Ok("greedy") => meshopt::build_meshlets(indices, &adapter, settings.max_vertices as usize, max_t, 0.0),
+        Ok("flex") => {
+            meshopt::build_meshlets_flex(indices, &adapter, settings.max_vertices as usize, max_t / 2, max_t, 0.0, 0.0)
+        }
+        _ => meshopt::build_meshlets_spatial(indices, &adapter, settings.max_vertices as usize, max_t / 4, max_t, 0.5),
     };
-    meshlets
-        .iter()
-        .map(|m| {
-            m.triangles
-                .iter()
-                .map(|&t| m.vertices[t as usize])
-                .collect()
-        })
-        .collect()
+    meshlets.iter().map(|m| m.triangles.iter().map(|&t| m.vertices[t as usize]).collect()).collect()
 }
 
 /// Bounding sphere of the vertices a triangle list uses (meshopt's Ritter-style bound).
@@ -69,15 +42,9 @@ pub fn bounding_sphere(indices: &[u32], positions: &[[f32; 3]]) -> Sphere {
             for &i in indices {
                 radius = radius.max(distance(b.center, positions[i as usize]));
             }
-            Sphere {
-                center: b.center,
-                radius: radius * (1.0 + 1e-6),
-            }
+            Sphere { center: b.center, radius: radius * (1.0 + 1e-6) }
         }
-        Err(_) => Sphere {
-            center: [0.0; 3],
-            radius: 0.0,
-        },
+        Err(_) => Sphere { center: [0.0; 3], radius: 0.0 },
     }
 }
 
@@ -92,18 +59,9 @@ pub fn enclosing_sphere(spheres: impl Iterator<Item = Sphere> + Clone) -> Sphere
             hi[k] = hi[k].max(s.center[k] + s.radius);
         }
     }
-    let center = [
-        (lo[0] + hi[0]) * 0.5,
-        (lo[1] + hi[1]) * 0.5,
-        (lo[2] + hi[2]) * 0.5,
-    ];
-    let radius = spheres
-        .map(|s| distance(center, s.center) + s.radius)
-        .fold(0.0f32, f32::max);
-    Sphere {
-        center,
-        radius: radius * (1.0 + 1e-6),
-    }
+    let center = [(lo[0] + hi[0]) * 0.5, (lo[1] + hi[1]) * 0.5, (lo[2] + hi[2]) * 0.5];
+    let radius = spheres.map(|s| distance(center, s.center) + s.radius).fold(0.0f32, f32::max);
+    Sphere { center, radius: radius * (1.0 + 1e-6) }
 }
 
 /// Euclidean distance.
@@ -118,18 +76,9 @@ mod tests {
     #[test]
     fn enclosing_sphere_contains_inputs() {
         let spheres = [
-            Sphere {
-                center: [0.0, 0.0, 0.0],
-                radius: 1.0,
-            },
-            Sphere {
-                center: [5.0, 1.0, 0.0],
-                radius: 0.5,
-            },
-            Sphere {
-                center: [2.0, -3.0, 1.0],
-                radius: 2.0,
-            },
+            Sphere { center: [0.0, 0.0, 0.0], radius: 1.0 },
+            Sphere { center: [5.0, 1.0, 0.0], radius: 0.5 },
+            Sphere { center: [2.0, -3.0, 1.0], radius: 2.0 },
         ];
         let s = enclosing_sphere(spheres.iter().copied());
         for c in spheres {

@@ -38,10 +38,7 @@ impl PipelineConfig {
     /// Parses TOML text; `origin` names the file in errors.
     pub fn parse(text: &str, origin: &str) -> Result<PipelineConfig, String> {
         let config: PipelineConfig = toml::from_str(text).map_err(|e| format!("{origin}: {e}"))?;
-        config
-            .bake
-            .check()
-            .map_err(|e| format!("{origin}: [bake] {e}"))?;
+        config.bake.check().map_err(|e| format!("{origin}: [bake] {e}"))?;
         Ok(config)
     }
 

@@ -12,9 +12,7 @@ use crate::partition::{cluster_graph, partition};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Method};
 use crate::weld::WeldedMesh;
-use formats::mres::{
-    Dag, DagCluster, Group, Header, Sphere, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS, NO_GROUP,
-};
+use formats::mres::{Dag, DagCluster, Group, Header, Sphere, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS, NO_GROUP};
 use rayon::prelude::*;
 
 /// Most clusters the final root group may hold. A mesh whose coarsest clusters cannot be
@@ -58,13 +56,7 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
         .into_par_iter()
         .map(|indices| {
             let own_sphere = bounding_sphere(&indices, &mesh.positions);
-            Cluster {
-                indices,
-                own_group: NO_GROUP,
-                own_sphere,
-                own_error: 0.0,
-                group: NO_GROUP,
-            }
+            Cluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP }
         })
         .collect();
     let (always_locked, special) = open_and_nonmanifold(mesh);
@@ -76,14 +68,8 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
         if pending.len() <= 1 || level >= MAX_LEVELS {
             break;
         }
-        let refs: Vec<&[u32]> = pending
-            .iter()
-            .map(|&c| clusters[c].indices.as_slice())
-            .collect();
-        let centers: Vec<[f32; 3]> = pending
-            .iter()
-            .map(|&c| clusters[c].own_sphere.center)
-            .collect();
+        let refs: Vec<&[u32]> = pending.iter().map(|&c| clusters[c].indices.as_slice()).collect();
+        let centers: Vec<[f32; 3]> = pending.iter().map(|&c| clusters[c].own_sphere.center).collect();
         let graph = cluster_graph(&refs, &mesh.position_ids, &centers);
         let parts = partition(&graph, settings.group_size as usize);
         // Which group uses each position; positions used by two groups are locked.
@@ -92,11 +78,7 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
             for &c in part {
                 for &v in refs[c as usize] {
                     let o = &mut owner[mesh.position_ids[v as usize] as usize];
-                    *o = if *o == u32::MAX || *o == g as u32 {
-                        g as u32
-                    } else {
-                        u32::MAX - 1
-                    };
+                    *o = if *o == u32::MAX || *o == g as u32 { g as u32 } else { u32::MAX - 1 };
                 }
             }
         }
@@ -107,16 +89,9 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
         let mut results: Vec<Option<(Vec<Vec<u32>>, f32, Method)>> = parts
             .par_iter()
             .map(|part| {
-                let merged: Vec<u32> = part
-                    .iter()
-                    .flat_map(|&c| refs[c as usize].iter().copied())
-                    .collect();
+                let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
                 let s = simplify_group(mesh, &merged, locked, settings)?;
-                Some((
-                    split(&s.indices, &mesh.positions, settings),
-                    s.error,
-                    s.method,
-                ))
+                Some((split(&s.indices, &mesh.positions, settings), s.error, s.method))
             })
             .collect();
         revert_conflicts(mesh, &special, &parts, &refs, &mut results);
@@ -135,18 +110,8 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
             stats.methods[method as usize] += 1;
             let id = groups.len() as u32;
             let sphere = enclosing_sphere(members.iter().map(|&c| clusters[c].own_sphere));
-            let error = members
-                .iter()
-                .map(|&c| clusters[c].own_error)
-                .fold(error, f32::max);
-            groups.push(Group {
-                sphere,
-                error,
-                level,
-                first_cluster: 0,
-                cluster_count: 0,
-                page: 0,
-            });
+            let error = members.iter().map(|&c| clusters[c].own_error).fold(error, f32::max);
+            groups.push(Group { sphere, error, level, first_cluster: 0, cluster_count: 0, page: 0 });
             for &c in &members {
                 clusters[c].group = id;
             }
@@ -174,14 +139,8 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
     let roots: Vec<Vec<usize>> = if pending.len() <= MAX_ROOT_CLUSTERS {
         vec![pending.clone()]
     } else {
-        let refs: Vec<&[u32]> = pending
-            .iter()
-            .map(|&c| clusters[c].indices.as_slice())
-            .collect();
-        let centers: Vec<[f32; 3]> = pending
-            .iter()
-            .map(|&c| clusters[c].own_sphere.center)
-            .collect();
+        let refs: Vec<&[u32]> = pending.iter().map(|&c| clusters[c].indices.as_slice()).collect();
+        let centers: Vec<[f32; 3]> = pending.iter().map(|&c| clusters[c].own_sphere.center).collect();
         let graph = cluster_graph(&refs, &mesh.position_ids, &centers);
         partition(&graph, settings.group_size as usize)
             .into_iter()
@@ -193,14 +152,7 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
     for members in roots {
         let id = groups.len() as u32;
         let sphere = enclosing_sphere(members.iter().map(|&c| clusters[c].own_sphere));
-        groups.push(Group {
-            sphere,
-            error: f32::INFINITY,
-            level,
-            first_cluster: 0,
-            cluster_count: 0,
-            page: 0,
-        });
+        groups.push(Group { sphere, error: f32::INFINITY, level, first_cluster: 0, cluster_count: 0, page: 0 });
         for &c in &members {
             clusters[c].group = id;
         }
@@ -216,12 +168,7 @@ fn edge_key(a: u32, b: u32) -> u64 {
 /// Position-id edge keys of a triangle list, one per triangle side.
 fn edge_keys<'a>(mesh: &'a WeldedMesh, indices: &'a [u32]) -> impl Iterator<Item = u64> + 'a {
     indices.chunks_exact(3).flat_map(move |t| {
-        (0..3).map(move |k| {
-            edge_key(
-                mesh.position_ids[t[k] as usize],
-                mesh.position_ids[t[(k + 1) % 3] as usize],
-            )
-        })
+        (0..3).map(move |k| edge_key(mesh.position_ids[t[k] as usize], mesh.position_ids[t[(k + 1) % 3] as usize]))
     })
 }
 
@@ -229,11 +176,7 @@ fn edge_keys<'a>(mesh: &'a WeldedMesh, indices: &'a [u32]) -> impl Iterator<Item
 /// counts, sorted; and per position whether it lies on one. Those positions stay locked at
 /// every level so that every cut has exactly the original's boundary.
 fn open_and_nonmanifold(mesh: &WeldedMesh) -> (Vec<bool>, Vec<(u64, u32)>) {
-    let mut edges: Vec<u64> = mesh
-        .indices
-        .par_chunks(3 * 4096)
-        .flat_map_iter(|c| edge_keys(mesh, c))
-        .collect();
+    let mut edges: Vec<u64> = mesh.indices.par_chunks(3 * 4096).flat_map_iter(|c| edge_keys(mesh, c)).collect();
     edges.par_sort_unstable();
     let mut locked = vec![false; mesh.position_count];
     let mut special = Vec::new();
@@ -266,25 +209,19 @@ fn revert_conflicts(
             .enumerate()
             .flat_map_iter(|(g, (part, result))| -> Vec<(u64, u32)> {
                 match result {
-                    Some((children, _, _)) => children
-                        .iter()
-                        .flat_map(|c| edge_keys(mesh, c))
-                        .map(|k| (k, g as u32))
-                        .collect(),
-                    None => part
-                        .iter()
-                        .flat_map(|&c| edge_keys(mesh, refs[c as usize]))
-                        .map(|k| (k, u32::MAX))
-                        .collect(),
+                    Some((children, _, _)) => {
+                        children.iter().flat_map(|c| edge_keys(mesh, c)).map(|k| (k, g as u32)).collect()
+                    }
+                    None => {
+                        part.iter().flat_map(|&c| edge_keys(mesh, refs[c as usize])).map(|k| (k, u32::MAX)).collect()
+                    }
                 }
             })
             .collect();
         edges.par_sort_unstable();
         let mut conflicting: Vec<u32> = Vec::new();
         for run in edges.chunk_by(|a, b| a.0 == b.0) {
-            let expected = special
-                .binary_search_by_key(&run[0].0, |e| e.0)
-                .map_or(2, |i| special[i].1);
+            let expected = special.binary_search_by_key(&run[0].0, |e| e.0).map_or(2, |i| special[i].1);
             if run.len() as u32 != expected {
                 conflicting.extend(run.iter().map(|e| e.1).filter(|&g| g != u32::MAX));
             }
@@ -300,12 +237,7 @@ fn revert_conflicts(
 
 /// Converts the build result to the logical DAG the writer takes: per cluster, a local vertex
 /// array (grid positions, normals, UVs) and 8-bit local indices.
-fn to_dag(
-    mesh: &WeldedMesh,
-    settings: &BakeSettings,
-    groups: Vec<Group>,
-    clusters: Vec<Cluster>,
-) -> Dag {
+fn to_dag(mesh: &WeldedMesh, settings: &BakeSettings, groups: Vec<Group>, clusters: Vec<Cluster>) -> Dag {
     let mut flags = 0;
     if mesh.normals.is_some() {
         flags |= FLAG_NORMALS;
@@ -323,32 +255,19 @@ fn to_dag(
             // "the sweet spot for compression ratio").
             let (mut vertices, mut indices) = meshopt::extract_meshlet_indices(&c.indices);
             meshopt::optimize_meshlet_level(&mut vertices, &mut indices, 3);
-            let triangle_vertex: Vec<u32> = indices
-                .chunks_exact(3)
-                .map(|t| vertices[t[0] as usize])
-                .collect();
+            let triangle_vertex: Vec<u32> = indices.chunks_exact(3).map(|t| vertices[t[0] as usize]).collect();
             DagCluster {
                 group: c.group,
                 own_group: c.own_group,
-                positions: vertices
-                    .iter()
-                    .map(|&v| mesh.grid_positions[v as usize])
-                    .collect(),
+                positions: vertices.iter().map(|&v| mesh.grid_positions[v as usize]).collect(),
                 normals: mesh
                     .normals
                     .as_ref()
                     .map(|n| vertices.iter().map(|&v| n[v as usize]).collect())
                     .unwrap_or_default(),
-                uvs: mesh
-                    .uvs
-                    .as_ref()
-                    .map(|u| vertices.iter().map(|&v| u[v as usize]).collect())
-                    .unwrap_or_default(),
+                uvs: mesh.uvs.as_ref().map(|u| vertices.iter().map(|&v| u[v as usize]).collect()).unwrap_or_default(),
                 materials: if mesh.multi_material {
-                    triangle_vertex
-                        .iter()
-                        .map(|&v| mesh.materials[v as usize].min(u16::MAX as u32) as u16)
-                        .collect()
+                    triangle_vertex.iter().map(|&v| mesh.materials[v as usize].min(u16::MAX as u32) as u16).collect()
                 } else {
                     Vec::new()
                 },
@@ -365,9 +284,5 @@ fn to_dag(
         level_count: 0,
         source_triangles: mesh.source_triangles,
     };
-    Dag {
-        header,
-        groups,
-        clusters,
-    }
+    Dag { header, groups, clusters }
 }

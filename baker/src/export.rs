@@ -15,21 +15,15 @@ pub fn cut_mesh(file: &MresFile, cut: &[u32]) -> Result<SourceMesh, MresError> {
         if page_cache.as_ref().is_none_or(|(p, _)| *p != page) {
             page_cache = Some((page, file.page(page)?));
         }
-        let raw = &page_cache
-            .as_ref()
-            .map(|(_, r)| r.as_slice())
-            .unwrap_or(&[]);
+        let raw = &page_cache.as_ref().map(|(_, r)| r.as_slice()).unwrap_or(&[]);
         let d = file.decode_cluster(raw, c)?;
         let base = mesh.positions.len() as u32;
-        mesh.positions
-            .extend(d.positions.iter().map(|q| h.grid.decode(*q)));
+        mesh.positions.extend(d.positions.iter().map(|q| h.grid.decode(*q)));
         normals.extend_from_slice(&d.normals);
         uvs.extend_from_slice(&d.uvs);
-        mesh.indices
-            .extend(d.indices.iter().map(|&i| base + i as u32));
+        mesh.indices.extend(d.indices.iter().map(|&i| base + i as u32));
         if d.materials.is_empty() {
-            mesh.materials
-                .extend(std::iter::repeat_n(0, d.indices.len() / 3));
+            mesh.materials.extend(std::iter::repeat_n(0, d.indices.len() / 3));
         } else {
             mesh.materials.extend(d.materials.iter().map(|&m| m as u32));
         }

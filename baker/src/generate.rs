@@ -5,14 +5,7 @@ use formats::SourceMesh;
 
 fn mesh(positions: Vec<[f32; 3]>, indices: Vec<u32>) -> SourceMesh {
     let materials = vec![0; indices.len() / 3];
-    SourceMesh {
-        positions,
-        normals: None,
-        uvs: None,
-        indices,
-        materials,
-        degenerate_dropped: 0,
-    }
+    SourceMesh { positions, normals: None, uvs: None, indices, materials, degenerate_dropped: 0 }
 }
 
 /// A closed sphere of radius 1 made from a cube with `n`×`n` quads per face (12·n² triangles),
@@ -23,11 +16,7 @@ pub fn sphere(n: u32) -> SourceMesh {
     let mut positions = Vec::new();
     let mut vertex = |p: [i32; 3]| -> u32 {
         *index_of.entry(p).or_insert_with(|| {
-            let v = [
-                p[0] as f32 / n as f32,
-                p[1] as f32 / n as f32,
-                p[2] as f32 / n as f32,
-            ];
+            let v = [p[0] as f32 / n as f32, p[1] as f32 / n as f32, p[2] as f32 / n as f32];
             let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
             positions.push([v[0] / l, v[1] / l, v[2] / l]);
             positions.len() as u32 - 1
@@ -46,12 +35,7 @@ pub fn sphere(n: u32) -> SourceMesh {
                         p
                     };
                     let (i, j) = (i, j);
-                    let q = [
-                        vertex(at(i, j)),
-                        vertex(at(i + 1, j)),
-                        vertex(at(i + 1, j + 1)),
-                        vertex(at(i, j + 1)),
-                    ];
+                    let q = [vertex(at(i, j)), vertex(at(i + 1, j)), vertex(at(i + 1, j + 1)), vertex(at(i, j + 1))];
                     // Outward winding on both sides.
                     if side > 0 {
                         indices.extend_from_slice(&[q[0], q[1], q[2], q[0], q[2], q[3]]);
@@ -63,10 +47,7 @@ pub fn sphere(n: u32) -> SourceMesh {
         }
     }
     let normals = positions.clone();
-    SourceMesh {
-        normals: Some(normals),
-        ..mesh(positions, indices)
-    }
+    SourceMesh { normals: Some(normals), ..mesh(positions, indices) }
 }
 
 /// An open height-field terrain of `n`×`n` quads (2·n² triangles) over [0, 1]², with UVs.
@@ -92,10 +73,7 @@ pub fn terrain(n: u32) -> SourceMesh {
             indices.extend_from_slice(&[i, i + row, i + 1, i + 1, i + row, i + row + 1]);
         }
     }
-    SourceMesh {
-        uvs: Some(uvs),
-        ..mesh(positions, indices)
-    }
+    SourceMesh { uvs: Some(uvs), ..mesh(positions, indices) }
 }
 
 /// `count` disconnected closed boxes on a square grid, each face split into `k`×`k` quads
@@ -109,11 +87,7 @@ pub fn boxes(count: u32, k: u32) -> SourceMesh {
         let (gx, gz) = ((b % side) as f32 * 2.0, (b / side) as f32 * 2.0);
         let scale = 0.6 + 0.3 * ((b * 7919) % 13) as f32 / 13.0;
         let base = positions.len() as u32;
-        positions.extend(
-            unit.positions
-                .iter()
-                .map(|p| [gx + p[0] * scale, p[1] * scale, gz + p[2] * scale]),
-        );
+        positions.extend(unit.positions.iter().map(|p| [gx + p[0] * scale, p[1] * scale, gz + p[2] * scale]));
         indices.extend(unit.indices.iter().map(|i| base + i));
     }
     mesh(positions, indices)

@@ -28,11 +28,7 @@ pub struct ClusterGraph {
 
 /// Builds the cluster graph. `clusters[i]` is cluster i's triangle list (vertex ids),
 /// `position_ids` maps vertex → position, `centers` is each cluster's centre.
-pub fn cluster_graph(
-    clusters: &[&[u32]],
-    position_ids: &[u32],
-    centers: &[[f32; 3]],
-) -> ClusterGraph {
+pub fn cluster_graph(clusters: &[&[u32]], position_ids: &[u32], centers: &[[f32; 3]]) -> ClusterGraph {
     let n = clusters.len();
     // (edge key, cluster) for every triangle edge; runs of one key give the clusters sharing it.
     let mut edges: Vec<(u64, u32)> = clusters
@@ -78,10 +74,7 @@ pub fn cluster_graph(
         }
     }
 
-    let mut weighted: Vec<(u32, u32, i32)> = pairs
-        .into_iter()
-        .map(|(a, b)| (a, b, EDGE_WEIGHT))
-        .collect();
+    let mut weighted: Vec<(u32, u32, i32)> = pairs.into_iter().map(|(a, b)| (a, b, EDGE_WEIGHT)).collect();
     weighted.extend(links.into_iter().map(|(a, b)| (a, b, LOCALITY_WEIGHT)));
     weighted.par_sort_unstable();
     let mut xadj = vec![0i32; n + 1];
@@ -96,12 +89,7 @@ pub fn cluster_graph(
     for i in 0..n {
         xadj[i + 1] += xadj[i];
     }
-    ClusterGraph {
-        xadj,
-        adjncy,
-        weights,
-        morton,
-    }
+    ClusterGraph { xadj, adjncy, weights, morton }
 }
 
 fn components(n: usize, pairs: &[(u32, u32)]) -> Vec<u32> {
@@ -132,9 +120,7 @@ pub fn morton_codes(points: &[[f32; 3]]) -> Vec<u32> {
             hi[k] = hi[k].max(p[k]);
         }
     }
-    let extent = (0..3)
-        .map(|k| hi[k] - lo[k])
-        .fold(f32::MIN_POSITIVE, f32::max);
+    let extent = (0..3).map(|k| hi[k] - lo[k]).fold(f32::MIN_POSITIVE, f32::max);
     let spread = |v: u32| {
         let mut x = v & 0x3ff;
         x = (x | x << 16) & 0x030000ff;
@@ -157,23 +143,11 @@ pub fn partition(graph: &ClusterGraph, target: usize) -> Vec<Vec<u32>> {
     let n = graph.xadj.len() - 1;
     let mut groups = Vec::new();
     let mut local = vec![u32::MAX; n];
-    bisect(
-        graph,
-        (0..n as u32).collect(),
-        target.max(1),
-        &mut local,
-        &mut groups,
-    );
+    bisect(graph, (0..n as u32).collect(), target.max(1), &mut local, &mut groups);
     groups
 }
 
-fn bisect(
-    graph: &ClusterGraph,
-    nodes: Vec<u32>,
-    target: usize,
-    local: &mut [u32],
-    out: &mut Vec<Vec<u32>>,
-) {
+fn bisect(graph: &ClusterGraph, nodes: Vec<u32>, target: usize, local: &mut [u32], out: &mut Vec<Vec<u32>>) {
     let n = nodes.len();
     if n <= target + target / 2 {
         out.push(nodes);
@@ -181,8 +155,8 @@ fn bisect(
     }
     let k = ((n + target / 2) / target).max(2);
     let left_share = (k / 2) as f32 / k as f32;
-    let (left, right) = metis_bisect(graph, &nodes, left_share, local)
-        .unwrap_or_else(|| ordered_split(graph, &nodes, left_share));
+    let (left, right) =
+        metis_bisect(graph, &nodes, left_share, local).unwrap_or_else(|| ordered_split(graph, &nodes, left_share));
     bisect(graph, left, target, local, out);
     bisect(graph, right, target, local, out);
 }
@@ -196,12 +170,7 @@ fn ordered_split(graph: &ClusterGraph, nodes: &[u32], share: f32) -> (Vec<u32>, 
     (sorted, right)
 }
 
-fn metis_bisect(
-    graph: &ClusterGraph,
-    nodes: &[u32],
-    share: f32,
-    local: &mut [u32],
-) -> Option<(Vec<u32>, Vec<u32>)> {
+fn metis_bisect(graph: &ClusterGraph, nodes: &[u32], share: f32, local: &mut [u32]) -> Option<(Vec<u32>, Vec<u32>)> {
     for (i, &g) in nodes.iter().enumerate() {
         local[g as usize] = i as u32;
     }
@@ -210,10 +179,7 @@ fn metis_bisect(
     let mut weights = Vec::new();
     xadj.push(0);
     for &g in nodes {
-        let (s, e) = (
-            graph.xadj[g as usize] as usize,
-            graph.xadj[g as usize + 1] as usize,
-        );
+        let (s, e) = (graph.xadj[g as usize] as usize, graph.xadj[g as usize + 1] as usize);
         for j in s..e {
             let l = local[graph.adjncy[j] as usize];
             if l != u32::MAX {
@@ -264,14 +230,7 @@ mod tests {
             let v = |x: u32, y: u32| x * 3 + y;
             let mut t = Vec::new();
             for y in 0..2 {
-                t.extend_from_slice(&[
-                    v(c, y),
-                    v(c + 1, y),
-                    v(c + 1, y + 1),
-                    v(c, y),
-                    v(c + 1, y + 1),
-                    v(c, y + 1),
-                ]);
+                t.extend_from_slice(&[v(c, y), v(c + 1, y), v(c + 1, y + 1), v(c, y), v(c + 1, y + 1), v(c, y + 1)]);
             }
             clusters.push(t);
         }
@@ -292,20 +251,14 @@ mod tests {
         for g in &groups {
             assert!((8..=24).contains(&g.len()), "group of {}", g.len());
             let (lo, hi) = (g.iter().min().unwrap(), g.iter().max().unwrap());
-            assert_eq!(
-                (hi - lo + 1) as usize,
-                g.len(),
-                "group not contiguous on a strip: {g:?}"
-            );
+            assert_eq!((hi - lo + 1) as usize, g.len(), "group not contiguous on a strip: {g:?}");
         }
     }
 
     #[test]
     fn disconnected_clusters_get_locality_links() {
         // 50 separate single-triangle clusters on a line.
-        let clusters: Vec<Vec<u32>> = (0..50u32)
-            .map(|c| vec![c * 3, c * 3 + 1, c * 3 + 2])
-            .collect();
+        let clusters: Vec<Vec<u32>> = (0..50u32).map(|c| vec![c * 3, c * 3 + 1, c * 3 + 2]).collect();
         let refs: Vec<&[u32]> = clusters.iter().map(|c| c.as_slice()).collect();
         let ids: Vec<u32> = (0..150).collect();
         let centers: Vec<[f32; 3]> = (0..50).map(|c| [c as f32, 0.0, 0.0]).collect();

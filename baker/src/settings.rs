@@ -77,10 +77,7 @@ impl BakeSettings {
         range("group_size", self.group_size, 2, 64)?;
         range("zstd_level", self.zstd_level.max(0) as u32, 1, 22)?;
         if self.max_triangles % 4 != 0 {
-            return Err(format!(
-                "max_triangles = {} must be a multiple of 4",
-                self.max_triangles
-            ));
+            return Err(format!("max_triangles = {} must be a multiple of 4", self.max_triangles));
         }
         let unit = |key: &str, v: f32| {
             if v > 0.0 && v < 1.0 {

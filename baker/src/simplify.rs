@@ -33,8 +33,13 @@ pub struct Simplified {
 /// Sloppy simplification estimates its error loosely; scale it (clusterlod does the same).
 const SLOPPY_ERROR_FACTOR: f32 = 2.0;
 
+/// Attempts per method: after a result breaks the border or makes a non-manifold edge, the
+/// offending positions are locked and the method runs again.
+const REPAIR_ATTEMPTS: usize = 4;
+
 /// Simplifies the triangle list `indices` (welded vertex ids) with every vertex for which
-/// `locked` is true kept in place. `None` when no simplifier gets below the stuck ratio.
+/// `locked` is true kept in place. `None` when no simplifier gets below the stuck ratio with
+/// the group's border intact and its interior manifold.
 pub fn simplify_group(
     mesh: &WeldedMesh,
     indices: &[u32],
@@ -45,114 +50,127 @@ pub fn simplify_group(
     let mut vertices: Vec<u32> = indices.to_vec();
     vertices.sort_unstable();
     vertices.dedup();
-    let local: Vec<u32> = indices
-        .iter()
-        .map(|v| vertices.binary_search(v).unwrap_or(0) as u32)
-        .collect();
-    let positions: Vec<[f32; 3]> = vertices
-        .iter()
-        .map(|&v| mesh.positions[v as usize])
-        .collect();
-    let locks: Vec<bool> = vertices.iter().map(|&v| locked(v)).collect();
+    let local: Vec<u32> = indices.iter().map(|v| vertices.binary_search(v).unwrap_or(0) as u32).collect();
+    let positions: Vec<[f32; 3]> = vertices.iter().map(|&v| mesh.positions[v as usize]).collect();
     let (attributes, weights) = attributes(mesh, &vertices, settings);
-    let stride = weights.len() * 4;
-
     let bytes = meshopt::typed_to_bytes(&positions);
     let adapter = VertexDataAdapter::new(bytes, 12, 0).ok()?;
     let triangles = indices.len() / 3;
-    let target = ((triangles as f32 * settings.simplify_ratio) as usize).max(1) * 3;
-    let limit = (triangles as f32 * settings.stuck_ratio) as usize;
-    let accept = |result: &[u32]| -> bool { result.len() / 3 <= limit && !result.is_empty() };
-    // Prune lets whole unlocked components (a far-away box, a leaf) vanish when their error
-    // allows, so that meshes of many disconnected parts still reach one root.
-    let base =
-        SimplifyOptions::LockBorder | SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune;
+    let group = Group {
+        mesh,
+        vertices: &vertices,
+        local: &local,
+        positions: &positions,
+        adapter: &adapter,
+        attributes: &attributes,
+        weights: &weights,
+        limit: (triangles as f32 * settings.stuck_ratio) as usize,
+        border: EdgeCounts::border(mesh, indices),
+    };
+    for method in [Method::Regular, Method::Permissive, Method::Prune, Method::Sloppy] {
+        if method == Method::Permissive && weights.is_empty() {
+            continue; // without attributes there are no seams to relax
+        }
+        let mut locks: Vec<bool> = vertices.iter().map(|&v| locked(v)).collect();
+        let mut ratio = settings.simplify_ratio;
+        for _ in 0..REPAIR_ATTEMPTS {
+            let target = ((triangles as f32 * ratio) as usize).max(1) * 3;
+            let Some((out, error)) = group.run(method, &locks, target) else { break };
+            if out.is_empty() || out.len() / 3 > group.limit || !error.is_finite() {
+                break;
+            }
+            match group.border.check(mesh, &out) {
+                Ok(()) => return Some(Simplified { indices: out, error, method }),
+                Err(bad) => {
+                    // Lock the offending edges' ends and their neighbours, and aim a little
+                    // less low: such pinches come from the last collapses.
+                    let mut lock_positions: Vec<u32> = bad.iter().flat_map(|&e| [(e >> 32) as u32, e as u32]).collect();
+                    lock_positions.sort_unstable();
+                    let ring: Vec<u32> = indices
+                        .chunks_exact(3)
+                        .filter(|t| {
+                            t.iter().any(|&v| lock_positions.binary_search(&mesh.position_ids[v as usize]).is_ok())
+                        })
+                        .flatten()
+                        .map(|&v| mesh.position_ids[v as usize])
+                        .collect();
+                    lock_positions.extend(ring);
+                    lock_positions.sort_unstable();
+                    for (v, lock) in vertices.iter().zip(&mut locks) {
+                        *lock |= lock_positions.binary_search(&mesh.position_ids[*v as usize]).is_ok();
+                    }
+                    ratio = (ratio + 0.1).min(settings.stuck_ratio - 0.05);
+                }
+            }
+        }
+    }
+    None
+}
 
-    let border = EdgeCounts::border(mesh, indices);
-    for method in [
-        Method::Regular,
-        Method::Permissive,
-        Method::Prune,
-        Method::Sloppy,
-    ] {
+/// One group's simplification inputs.
+struct Group<'a> {
+    mesh: &'a WeldedMesh,
+    /// Local vertex → mesh vertex.
+    vertices: &'a [u32],
+    /// Triangle list in local vertices.
+    local: &'a [u32],
+    positions: &'a [[f32; 3]],
+    adapter: &'a VertexDataAdapter<'a>,
+    attributes: &'a [f32],
+    weights: &'a [f32],
+    /// Most triangles a result may keep and still count as progress.
+    limit: usize,
+    border: EdgeCounts,
+}
+
+impl Group<'_> {
+    /// Runs `method` with `locks`; returns the result in mesh vertex ids without triangles
+    /// degenerate by position, and its object-space error.
+    fn run(&self, method: Method, locks: &[bool], target: usize) -> Option<(Vec<u32>, f32)> {
+        let (local, adapter) = (self.local, self.adapter);
+        let stride = self.weights.len() * 4;
+        // Prune lets whole unlocked components (a far-away box, a leaf) vanish when their error
+        // allows, so that meshes of many disconnected parts still reach one root.
+        let base = SimplifyOptions::LockBorder | SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune;
         let mut error = 0.0f32;
         let result = match method {
-            Method::Regular if stride == 0 => meshopt::simplify_with_locks(
-                &local,
-                &adapter,
-                &locks,
-                target,
-                f32::MAX,
-                base,
-                Some(&mut error),
-            ),
-            Method::Regular => meshopt::simplify_with_attributes_and_locks(
-                &local,
-                &adapter,
-                &attributes,
-                &weights,
-                stride,
-                &locks,
-                target,
-                f32::MAX,
-                base,
-                Some(&mut error),
-            ),
-            // Without attributes there are no seams to relax.
-            Method::Permissive if stride == 0 => continue,
-            Method::Permissive => meshopt::simplify_with_attributes_and_locks(
-                &local,
-                &adapter,
-                &attributes,
-                &weights,
-                stride,
-                &locks,
-                target,
-                f32::MAX,
-                base | SimplifyOptions::Permissive,
-                Some(&mut error),
-            ),
+            Method::Regular | Method::Permissive => {
+                let options = if method == Method::Permissive { base | SimplifyOptions::Permissive } else { base };
+                meshopt::simplify_with_attributes_and_locks(
+                    local,
+                    adapter,
+                    self.attributes,
+                    self.weights,
+                    stride,
+                    locks,
+                    target,
+                    f32::MAX,
+                    options,
+                    Some(&mut error),
+                )
+            }
             Method::Prune => {
-                let (r, e) = prune_components(&local, &positions, &locks, &vertices, mesh, target);
+                let (r, e) = prune_components(local, self.positions, locks, self.vertices, self.mesh, target);
                 error = e;
                 r
             }
             Method::Sloppy => {
-                let r = meshopt::simplify_sloppy_with_locks(
-                    &local,
-                    &adapter,
-                    &locks,
-                    target,
-                    f32::MAX,
-                    Some(&mut error),
-                );
+                let r = meshopt::simplify_sloppy_with_locks(local, adapter, locks, target, f32::MAX, Some(&mut error));
                 // Sloppy error is relative to the group's extent.
-                error *= meshopt::simplify_scale(&adapter) * SLOPPY_ERROR_FACTOR;
+                error *= meshopt::simplify_scale(adapter) * SLOPPY_ERROR_FACTOR;
                 r
             }
         };
-        // Back to mesh vertex ids, dropping triangles degenerate by position (sloppy makes them).
         let mut out = Vec::with_capacity(result.len());
         for t in result.chunks_exact(3) {
-            let g = [
-                vertices[t[0] as usize],
-                vertices[t[1] as usize],
-                vertices[t[2] as usize],
-            ];
-            let p = g.map(|v| mesh.position_ids[v as usize]);
+            let g = [self.vertices[t[0] as usize], self.vertices[t[1] as usize], self.vertices[t[2] as usize]];
+            let p = g.map(|v| self.mesh.position_ids[v as usize]);
             if p[0] != p[1] && p[1] != p[2] && p[0] != p[2] {
                 out.extend_from_slice(&g);
             }
         }
-        if accept(&out) && error.is_finite() && border.preserved_by(mesh, &out) {
-            return Some(Simplified {
-                indices: out,
-                error,
-                method,
-            });
-        }
+        Some((out, error))
     }
-    None
 }
 
 /// Edge use counts by position, to check that a simplified group keeps its border exactly
@@ -180,36 +198,39 @@ fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
 impl EdgeCounts {
     fn border(mesh: &WeldedMesh, indices: &[u32]) -> EdgeCounts {
         let keys = edge_keys(mesh, indices);
-        let border = keys
-            .chunk_by(|a, b| a == b)
-            .filter(|r| r.len() != 2)
-            .map(|r| (r[0], r.len() as u32))
-            .collect();
+        let border = keys.chunk_by(|a, b| a == b).filter(|r| r.len() != 2).map(|r| (r[0], r.len() as u32)).collect();
         EdgeCounts { border }
     }
 
-    /// True if `out` uses every border edge as often as the input and every other edge twice.
-    fn preserved_by(&self, mesh: &WeldedMesh, out: &[u32]) -> bool {
+    /// `Ok` if `out` uses every border edge as often as the input and every other edge twice;
+    /// otherwise the offending edges (including border edges it lost).
+    fn check(&self, mesh: &WeldedMesh, out: &[u32]) -> Result<(), Vec<u64>> {
         let keys = edge_keys(mesh, out);
-        let mut matched = 0;
+        let mut bad = Vec::new();
+        let mut seen = vec![false; self.border.len()];
         for run in keys.chunk_by(|a, b| a == b) {
             match self.border.binary_search_by_key(&run[0], |e| e.0) {
-                Ok(i) if self.border[i].1 == run.len() as u32 => matched += 1,
-                Ok(_) => return false,
-                Err(_) if run.len() != 2 => return false,
+                Ok(i) => {
+                    seen[i] = true;
+                    if self.border[i].1 != run.len() as u32 {
+                        bad.push(run[0]);
+                    }
+                }
+                Err(_) if run.len() != 2 => bad.push(run[0]),
                 Err(_) => {}
             }
         }
-        matched == self.border.len()
+        bad.extend(self.border.iter().zip(&seen).filter(|(_, s)| !**s).map(|(e, _)| e.0));
+        if bad.is_empty() {
+            Ok(())
+        } else {
+            Err(bad)
+        }
     }
 }
 
 /// Per-vertex attribute rows (normal xyz, uv normalized to the mesh's UV range) and weights.
-fn attributes(
-    mesh: &WeldedMesh,
-    vertices: &[u32],
-    settings: &BakeSettings,
-) -> (Vec<f32>, Vec<f32>) {
+fn attributes(mesh: &WeldedMesh, vertices: &[u32], settings: &BakeSettings) -> (Vec<f32>, Vec<f32>) {
     let mut weights = Vec::new();
     if mesh.normals.is_some() && settings.normal_weight > 0.0 {
         weights.extend_from_slice(&[settings.normal_weight; 3]);
@@ -271,9 +292,8 @@ fn prune_components(
         union(&mut parent, t[0], t[1]);
         union(&mut parent, t[1], t[2]);
     }
-    let mut by_position: Vec<(u32, u32)> = (0..n as u32)
-        .map(|v| (mesh.position_ids[vertices[v as usize] as usize], v))
-        .collect();
+    let mut by_position: Vec<(u32, u32)> =
+        (0..n as u32).map(|v| (mesh.position_ids[vertices[v as usize] as usize], v)).collect();
     by_position.sort_unstable();
     for run in by_position.chunk_by(|a, b| a.0 == b.0) {
         for w in run.windows(2) {
@@ -298,10 +318,7 @@ fn prune_components(
         triangles[root[t[0] as usize] as usize] += 1;
     }
     let diagonal = |r: usize| {
-        ((hi[r][0] - lo[r][0]).powi(2)
-            + (hi[r][1] - lo[r][1]).powi(2)
-            + (hi[r][2] - lo[r][2]).powi(2))
-        .sqrt()
+        ((hi[r][0] - lo[r][0]).powi(2) + (hi[r][1] - lo[r][1]).powi(2) + (hi[r][2] - lo[r][2]).powi(2)).sqrt()
     };
     let mut candidates: Vec<usize> = (0..n).filter(|&r| triangles[r] > 0 && !locked[r]).collect();
     candidates.sort_by(|&a, &b| diagonal(a).total_cmp(&diagonal(b)).then(a.cmp(&b)));
@@ -317,11 +334,6 @@ fn prune_components(
         remaining -= triangles[r] * 3;
         error = error.max(diagonal(r));
     }
-    let kept = local
-        .chunks_exact(3)
-        .filter(|t| !removed[root[t[0] as usize] as usize])
-        .flatten()
-        .copied()
-        .collect();
+    let kept = local.chunks_exact(3).filter(|t| !removed[root[t[0] as usize] as usize]).flatten().copied().collect();
     (kept, error)
 }

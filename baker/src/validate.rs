@@ -26,11 +26,7 @@ pub struct ValidateOptions {
 
 impl Default for ValidateOptions {
     fn default() -> Self {
-        ValidateOptions {
-            random_cuts: 1000,
-            seed: 1,
-            max_listed: 20,
-        }
+        ValidateOptions { random_cuts: 1000, seed: 1, max_listed: 20 }
     }
 }
 
@@ -132,18 +128,9 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
             groups[c.own_group as usize].level + 1
         }
     };
-    let levels = clusters
-        .iter()
-        .map(|c| cluster_level(c) + 1)
-        .chain(groups.iter().map(|g| g.level + 1))
-        .max()
-        .unwrap_or(0);
-    report.per_level = (0..levels)
-        .map(|level| LevelStats {
-            level,
-            ..Default::default()
-        })
-        .collect();
+    let levels =
+        clusters.iter().map(|c| cluster_level(c) + 1).chain(groups.iter().map(|g| g.level + 1)).max().unwrap_or(0);
+    report.per_level = (0..levels).map(|level| LevelStats { level, ..Default::default() }).collect();
     let mut outputs = vec![0u32; groups.len()];
     for (i, c) in clusters.iter().enumerate() {
         let l = &mut report.per_level[cluster_level(c) as usize];
@@ -154,17 +141,24 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
             let (child, parent) = (&groups[c.own_group as usize], &groups[c.group as usize]);
             report.relations_checked += 1;
             if !(parent.error >= child.error) {
-                report.violation(max, || format!("cluster {i}: parent group {} error {} < own group {} error {} (monotone errors)", c.group, parent.error, c.own_group, child.error));
+                report.violation(max, || {
+                    format!(
+                        "cluster {i}: parent group {} error {} < own group {} error {} (monotone errors)",
+                        c.group, parent.error, c.own_group, child.error
+                    )
+                });
             }
             if !contains(&parent.sphere, &child.sphere) {
-                report.violation(max, || format!("cluster {i}: sphere of parent group {} does not contain own group {}'s (nested bounds)", c.group, c.own_group));
+                report.violation(max, || {
+                    format!(
+                        "cluster {i}: sphere of parent group {} does not contain own group {}'s (nested bounds)",
+                        c.group, c.own_group
+                    )
+                });
             }
             if child.level >= parent.level {
                 report.violation(max, || {
-                    format!(
-                        "cluster {i}: own group {} is not below its group {} (DAG order)",
-                        c.own_group, c.group
-                    )
+                    format!("cluster {i}: own group {} is not below its group {} (DAG order)", c.own_group, c.group)
                 });
             }
         }
@@ -177,7 +171,9 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
             report.root_groups += 1;
             report.root_clusters += group.cluster_count as u64;
         } else if outputs[g] == 0 {
-            report.violation(max, || format!("group {g}: finite error but no clusters produced by it (its members would vanish)"));
+            report.violation(max, || {
+                format!("group {g}: finite error but no clusters produced by it (its members would vanish)")
+            });
         }
     }
     if report.root_groups == 0 {
@@ -188,22 +184,13 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
 
     // Invariant 1: cuts.
     let edges = edge_tables(file, &decoded);
-    let mut thresholds: Vec<f32> = groups
-        .iter()
-        .map(|g| g.error)
-        .filter(|e| e.is_finite())
-        .collect();
+    let mut thresholds: Vec<f32> = groups.iter().map(|g| g.error).filter(|e| e.is_finite()).collect();
     thresholds.push(0.0);
     thresholds.sort_by(f32::total_cmp);
     thresholds.dedup();
     let uniform: Vec<(String, Vec<u32>)> = thresholds
         .iter()
-        .map(|&t| {
-            (
-                format!("uniform cut at error {t}"),
-                select::uniform_cut(groups, clusters, t),
-            )
-        })
+        .map(|&t| (format!("uniform cut at error {t}"), select::uniform_cut(groups, clusters, t)))
         .collect();
     let cameras = random_views(file, options.random_cuts, options.seed);
     report.uniform_cuts = uniform.len() as u64;
@@ -213,32 +200,20 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
         .map(|(name, cut)| (name, check_cut(&edges, &cut, clusters)))
         .chain(cameras.into_par_iter().map(|(view, tau)| {
             let cut = select::view_cut(groups, clusters, &view, tau);
-            (
-                format!("view cut eye {:?} tau {tau} px", view.eye),
-                check_cut(&edges, &cut, clusters),
-            )
+            (format!("view cut eye {:?} tau {tau} px", view.eye), check_cut(&edges, &cut, clusters))
         }))
         .filter(|(_, problems)| !problems.is_empty())
         .collect();
     for (name, problems) in failures {
         report.cracked_cuts += 1;
-        report.violation(max, || {
-            format!(
-                "{name}: {} (crack-free cuts); first: {}",
-                problems.len(),
-                problems[0]
-            )
-        });
+        report.violation(max, || format!("{name}: {} (crack-free cuts); first: {}", problems.len(), problems[0]));
     }
     Ok(report)
 }
 
 /// True if `outer` contains `inner` (checked in f64).
 fn contains(outer: &Sphere, inner: &Sphere) -> bool {
-    let d: f64 = (0..3)
-        .map(|k| (outer.center[k] as f64 - inner.center[k] as f64).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let d: f64 = (0..3).map(|k| (outer.center[k] as f64 - inner.center[k] as f64).powi(2)).sum::<f64>().sqrt();
     d + inner.radius as f64 <= outer.radius as f64
 }
 
@@ -278,11 +253,7 @@ fn edge_tables(file: &MresFile, decoded: &[formats::mres::DecodedCluster]) -> Ed
     let id_of = |k: u64| all.binary_search(&k).unwrap_or(0) as u32;
     let per_cluster: Vec<Vec<(u32, u8)>> = keys_per_cluster
         .par_iter()
-        .map(|keys| {
-            keys.chunk_by(|a, b| a == b)
-                .map(|run| (id_of(run[0]), run.len().min(255) as u8))
-                .collect()
-        })
+        .map(|keys| keys.chunk_by(|a, b| a == b).map(|run| (id_of(run[0]), run.len().min(255) as u8)).collect())
         .collect();
     let mut expected = vec![2u8; all.len()];
     let mut original = vec![0u32; all.len()];
@@ -300,21 +271,8 @@ fn edge_tables(file: &MresFile, decoded: &[formats::mres::DecodedCluster]) -> Ed
             special.push(e as u32);
         }
     }
-    let ends = all
-        .iter()
-        .map(|k| {
-            (
-                positions[(k >> 32) as usize],
-                positions[(k & 0xffff_ffff) as usize],
-            )
-        })
-        .collect();
-    Edges {
-        per_cluster,
-        expected,
-        special,
-        ends,
-    }
+    let ends = all.iter().map(|k| (positions[(k >> 32) as usize], positions[(k & 0xffff_ffff) as usize])).collect();
+    Edges { per_cluster, expected, special, ends }
 }
 
 /// Checks one cut; returns a description of each bad edge (at most a few).
@@ -343,11 +301,8 @@ fn check_cut(edges: &Edges, cut: &[u32], clusters: &[formats::mres::ClusterInfo]
             problems.push(String::new());
         }
     };
-    let mut bad: Vec<(u32, u32)> = count
-        .iter()
-        .filter(|(e, n)| **n != edges.expected[**e as usize] as u32)
-        .map(|(e, n)| (*e, *n))
-        .collect();
+    let mut bad: Vec<(u32, u32)> =
+        count.iter().filter(|(e, n)| **n != edges.expected[**e as usize] as u32).map(|(e, n)| (*e, *n)).collect();
     bad.sort_unstable();
     for (e, n) in bad {
         describe(e, n);
@@ -362,11 +317,7 @@ fn check_cut(edges: &Edges, cut: &[u32], clusters: &[formats::mres::ClusterInfo]
 
 /// Random cameras around and inside the model's bounds, with random pixel thresholds.
 fn random_views(file: &MresFile, n: usize, seed: u64) -> Vec<(select::ViewParams, f32)> {
-    let Some(root) = file
-        .groups
-        .iter()
-        .max_by(|a, b| a.sphere.radius.total_cmp(&b.sphere.radius))
-    else {
+    let Some(root) = file.groups.iter().max_by(|a, b| a.sphere.radius.total_cmp(&b.sphere.radius)) else {
         return Vec::new();
     };
     let (center, radius) = (root.sphere.center, root.sphere.radius.max(1e-6));

@@ -81,9 +81,7 @@ pub fn weld(mesh: &SourceMesh, settings: &BakeSettings) -> Option<WeldedMesh> {
             }
             welded[k] = {
                 let q = grid.quantize(mesh.positions[s]);
-                let n = normals
-                    .map(|n| formats::mres::bits::oct_encode(n[s], settings.normal_bits))
-                    .unwrap_or([0; 2]);
+                let n = normals.map(|n| formats::mres::bits::oct_encode(n[s], settings.normal_bits)).unwrap_or([0; 2]);
                 let t = uvs.map(|u| uv.quantize(u[s])).unwrap_or([0; 2]);
                 let next = out.grid_positions.len() as u32;
                 *vertex_of.entry((q, n, t, material)).or_insert_with(|| {
@@ -127,15 +125,9 @@ fn uv_quant(uvs: &[[f32; 2]]) -> UvQuant {
         }
     }
     if uvs.is_empty() {
-        return UvQuant {
-            min: [0.0; 2],
-            extent: [0.0; 2],
-        };
+        return UvQuant { min: [0.0; 2], extent: [0.0; 2] };
     }
-    UvQuant {
-        min,
-        extent: [max[0] - min[0], max[1] - min[1]],
-    }
+    UvQuant { min, extent: [max[0] - min[0], max[1] - min[1]] }
 }
 
 #[cfg(test)]
@@ -154,14 +146,7 @@ mod tests {
                 [0.0, 1.0, 0.0],
                 [1.0, 1.0, 0.0],
             ],
-            uvs: Some(vec![
-                [0.0, 0.0],
-                [0.5, 0.0],
-                [0.0, 0.5],
-                [0.6, 0.0],
-                [0.0, 0.6],
-                [1.0, 1.0],
-            ]),
+            uvs: Some(vec![[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.6, 0.0], [0.0, 0.6], [1.0, 1.0]]),
             normals: None,
             indices: vec![0, 1, 2, 3, 5, 4],
             materials: vec![0, 0],
@@ -176,13 +161,7 @@ mod tests {
     #[test]
     fn duplicates_weld_and_grid_degenerates_drop() {
         let mesh = SourceMesh {
-            positions: vec![
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [1e-9, 0.0, 0.0],
-            ],
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [1e-9, 0.0, 0.0]],
             indices: vec![0, 1, 2, 3, 2, 0, 0, 4, 2],
             materials: vec![0, 0, 0],
             ..Default::default()

@@ -36,13 +36,7 @@ pub fn write_obj(mesh: &SourceMesh, out: &mut impl Write) -> io::Result<()> {
                 (false, false) => format!("{i}"),
             }
         };
-        writeln!(
-            out,
-            "f {} {} {}",
-            corner(tri[0]),
-            corner(tri[1]),
-            corner(tri[2])
-        )?;
+        writeln!(out, "f {} {} {}", corner(tri[0]), corner(tri[1]), corner(tri[2]))?;
     }
     Ok(())
 }

@@ -10,15 +10,11 @@ use formats::import::{import_file, referenced_files, ImportError, ImportErrorKin
 use formats::SourceMesh;
 
 fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
 }
 
 fn bad_input(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../tests/bad-inputs")
-        .join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/bad-inputs").join(name)
 }
 
 fn import(path: &Path) -> Result<SourceMesh, ImportError> {
@@ -58,11 +54,7 @@ fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
 }
 
 fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -91,129 +83,49 @@ type KindCheck = fn(&ImportErrorKind) -> bool;
 const BAD_INPUTS: &[(&str, KindCheck)] = &[
     ("empty.obj", |k| matches!(k, ImportErrorKind::EmptyFile)),
     ("truncated.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
-    ("nan_position.obj", |k| {
-        matches!(k, ImportErrorKind::NonFinitePosition(_))
-    }),
-    ("inf_position.obj", |k| {
-        matches!(k, ImportErrorKind::NonFinitePosition(_))
-    }),
-    ("index_out_of_range.obj", |k| {
-        matches!(k, ImportErrorKind::IndexOutOfRange { .. })
-    }),
-    ("negative_index_out_of_range.obj", |k| {
-        matches!(k, ImportErrorKind::IndexOutOfRange { .. })
-    }),
-    ("texcoord_index_zero.obj", |k| {
-        matches!(k, ImportErrorKind::IndexOutOfRange { .. })
-    }),
-    ("no_faces.obj", |k| {
-        matches!(k, ImportErrorKind::NoTriangles { .. })
-    }),
-    ("degenerate_only.obj", |k| {
-        matches!(
-            k,
-            ImportErrorKind::NoTriangles {
-                degenerate_dropped: 2
-            }
-        )
-    }),
-    ("lines_only.obj", |k| {
-        matches!(k, ImportErrorKind::NoTriangles { .. })
-    }),
+    ("nan_position.obj", |k| matches!(k, ImportErrorKind::NonFinitePosition(_))),
+    ("inf_position.obj", |k| matches!(k, ImportErrorKind::NonFinitePosition(_))),
+    ("index_out_of_range.obj", |k| matches!(k, ImportErrorKind::IndexOutOfRange { .. })),
+    ("negative_index_out_of_range.obj", |k| matches!(k, ImportErrorKind::IndexOutOfRange { .. })),
+    ("texcoord_index_zero.obj", |k| matches!(k, ImportErrorKind::IndexOutOfRange { .. })),
+    ("no_faces.obj", |k| matches!(k, ImportErrorKind::NoTriangles { .. })),
+    ("degenerate_only.obj", |k| matches!(k, ImportErrorKind::NoTriangles { degenerate_dropped: 2 })),
+    ("lines_only.obj", |k| matches!(k, ImportErrorKind::NoTriangles { .. })),
     ("not_utf8.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
-    ("bad_face_token.obj", |k| {
-        matches!(k, ImportErrorKind::Parse(_))
-    }),
+    ("bad_face_token.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
     ("empty.glb", |k| matches!(k, ImportErrorKind::EmptyFile)),
     ("truncated.glb", |k| matches!(k, ImportErrorKind::Parse(_))),
-    ("glb_header_length_too_small.glb", |k| {
-        matches!(k, ImportErrorKind::Parse(_))
-    }),
-    ("glb_chunk_past_end.glb", |k| {
-        matches!(k, ImportErrorKind::Parse(_))
-    }),
-    ("glb_missing_bin_chunk.glb", |k| {
-        matches!(k, ImportErrorKind::Parse(_))
-    }),
-    ("glb_version_1.glb", |k| {
-        matches!(k, ImportErrorKind::Parse(_))
-    }),
+    ("glb_header_length_too_small.glb", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("glb_chunk_past_end.glb", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("glb_missing_bin_chunk.glb", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("glb_version_1.glb", |k| matches!(k, ImportErrorKind::Parse(_))),
     ("not_glb.glb", |k| matches!(k, ImportErrorKind::Parse(_))),
     ("bad_json.gltf", |k| matches!(k, ImportErrorKind::Parse(_))),
     ("no_meshes.gltf", |k| matches!(k, ImportErrorKind::NoMeshes)),
-    ("points_only.gltf", |k| {
-        matches!(k, ImportErrorKind::UnsupportedPrimitiveMode(_))
-    }),
-    ("lines_only.gltf", |k| {
-        matches!(k, ImportErrorKind::UnsupportedPrimitiveMode(_))
-    }),
+    ("points_only.gltf", |k| matches!(k, ImportErrorKind::UnsupportedPrimitiveMode(_))),
+    ("lines_only.gltf", |k| matches!(k, ImportErrorKind::UnsupportedPrimitiveMode(_))),
     ("buffer_length_beyond_file.gltf", |k| {
-        matches!(
-            k,
-            ImportErrorKind::BufferTooShort {
-                declared: 1_000_000,
-                actual: 44,
-                ..
-            }
-        )
+        matches!(k, ImportErrorKind::BufferTooShort { declared: 1_000_000, actual: 44, .. })
     }),
-    ("huge_accessor.gltf", |k| {
-        matches!(k, ImportErrorKind::InvalidAccessor { .. })
-    }),
-    ("view_beyond_buffer.gltf", |k| {
-        matches!(k, ImportErrorKind::InvalidAccessor { .. })
-    }),
-    ("uri_escape.gltf", |k| {
-        matches!(k, ImportErrorKind::UriOutsideAssetDir(_))
-    }),
-    ("uri_absolute.gltf", |k| {
-        matches!(k, ImportErrorKind::UriOutsideAssetDir(_))
-    }),
-    ("uri_file_scheme.gltf", |k| {
-        matches!(k, ImportErrorKind::UriOutsideAssetDir(_))
-    }),
-    ("uri_percent_escape.gltf", |k| {
-        matches!(k, ImportErrorKind::UriOutsideAssetDir(_))
-    }),
-    ("uri_http.gltf", |k| {
-        matches!(k, ImportErrorKind::UnsupportedUri(_))
-    }),
-    ("missing_buffer_file.gltf", |k| {
-        matches!(k, ImportErrorKind::BufferIo { .. })
-    }),
-    ("bad_base64.gltf", |k| {
-        matches!(k, ImportErrorKind::Parse(_))
-    }),
-    ("index_out_of_range.gltf", |k| {
-        matches!(k, ImportErrorKind::IndexOutOfRange { .. })
-    }),
-    ("nan_position.gltf", |k| {
-        matches!(k, ImportErrorKind::NonFinitePosition(_))
-    }),
-    ("position_accessor_out_of_range.gltf", |k| {
-        matches!(k, ImportErrorKind::IndexOutOfRange { index: 99, .. })
-    }),
-    ("node_cycle.gltf", |k| {
-        matches!(k, ImportErrorKind::Parse(_))
-    }),
-    ("node_dag_explosion.gltf", |k| {
-        matches!(k, ImportErrorKind::TooLarge(_))
-    }),
-    ("required_extension.gltf", |k| {
-        matches!(k, ImportErrorKind::UnsupportedGltfExtension(_))
-    }),
-    ("zero_count_accessor.gltf", |k| {
-        matches!(k, ImportErrorKind::InvalidAccessor { .. })
-    }),
-    ("stride_smaller_than_element.gltf", |k| {
-        matches!(k, ImportErrorKind::InvalidAccessor { .. })
-    }),
-    ("position_wrong_type.gltf", |k| {
-        matches!(k, ImportErrorKind::InvalidAccessor { .. })
-    }),
-    ("float_indices.gltf", |k| {
-        matches!(k, ImportErrorKind::InvalidAccessor { .. })
-    }),
+    ("huge_accessor.gltf", |k| matches!(k, ImportErrorKind::InvalidAccessor { .. })),
+    ("view_beyond_buffer.gltf", |k| matches!(k, ImportErrorKind::InvalidAccessor { .. })),
+    ("uri_escape.gltf", |k| matches!(k, ImportErrorKind::UriOutsideAssetDir(_))),
+    ("uri_absolute.gltf", |k| matches!(k, ImportErrorKind::UriOutsideAssetDir(_))),
+    ("uri_file_scheme.gltf", |k| matches!(k, ImportErrorKind::UriOutsideAssetDir(_))),
+    ("uri_percent_escape.gltf", |k| matches!(k, ImportErrorKind::UriOutsideAssetDir(_))),
+    ("uri_http.gltf", |k| matches!(k, ImportErrorKind::UnsupportedUri(_))),
+    ("missing_buffer_file.gltf", |k| matches!(k, ImportErrorKind::BufferIo { .. })),
+    ("bad_base64.gltf", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("index_out_of_range.gltf", |k| matches!(k, ImportErrorKind::IndexOutOfRange { .. })),
+    ("nan_position.gltf", |k| matches!(k, ImportErrorKind::NonFinitePosition(_))),
+    ("position_accessor_out_of_range.gltf", |k| matches!(k, ImportErrorKind::IndexOutOfRange { index: 99, .. })),
+    ("node_cycle.gltf", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("node_dag_explosion.gltf", |k| matches!(k, ImportErrorKind::TooLarge(_))),
+    ("required_extension.gltf", |k| matches!(k, ImportErrorKind::UnsupportedGltfExtension(_))),
+    ("zero_count_accessor.gltf", |k| matches!(k, ImportErrorKind::InvalidAccessor { .. })),
+    ("stride_smaller_than_element.gltf", |k| matches!(k, ImportErrorKind::InvalidAccessor { .. })),
+    ("position_wrong_type.gltf", |k| matches!(k, ImportErrorKind::InvalidAccessor { .. })),
+    ("float_indices.gltf", |k| matches!(k, ImportErrorKind::InvalidAccessor { .. })),
 ];
 
 #[test]
@@ -226,10 +138,7 @@ fn every_bad_input_fails_with_its_error_and_names_the_file() {
             Err(err) => err,
         };
         let message = err.to_string();
-        assert!(
-            message.starts_with(&path.display().to_string()),
-            "{name}: message does not name the file: {message}"
-        );
+        assert!(message.starts_with(&path.display().to_string()), "{name}: message does not name the file: {message}");
         assert_eq!(err.path, path);
         assert!(expected(&err.kind), "{name}: unexpected error: {message}");
         println!("{name}: {}", err.kind);
@@ -250,10 +159,7 @@ fn bad_input_corpus_and_readme_list_the_same_files() {
     tested.sort();
     assert_eq!(on_disk, tested, "files in tests/bad-inputs vs. BAD_INPUTS");
     for name in &tested {
-        assert!(
-            readme.contains(&format!("`{name}`")),
-            "README.md does not list {name}"
-        );
+        assert!(readme.contains(&format!("`{name}`")), "README.md does not list {name}");
     }
 }
 
@@ -264,23 +170,14 @@ fn missing_file_and_unknown_extension() {
     assert!(matches!(err.kind, ImportErrorKind::Io(_)), "{err}");
     assert!(err.to_string().contains("does_not_exist.obj"));
     let err = import(&data("two_objects.mtl")).unwrap_err();
-    assert!(
-        matches!(err.kind, ImportErrorKind::UnsupportedExtension),
-        "{err}"
-    );
+    assert!(matches!(err.kind, ImportErrorKind::UnsupportedExtension), "{err}");
     assert!(referenced_files(&missing).is_err());
 }
 
 #[test]
 fn limits_are_enforced() {
-    let tiny_file = ImportLimits {
-        max_file_bytes: 100,
-        ..ImportLimits::default()
-    };
-    let one_triangle = ImportLimits {
-        max_triangles: 1,
-        ..ImportLimits::default()
-    };
+    let tiny_file = ImportLimits { max_file_bytes: 100, ..ImportLimits::default() };
+    let one_triangle = ImportLimits { max_triangles: 1, ..ImportLimits::default() };
     for name in ["cube_uv_seams.obj", "strip_fan.gltf"] {
         for limits in [tiny_file, one_triangle] {
             let err = import_file(&data(name), &limits).unwrap_err();
@@ -290,10 +187,7 @@ fn limits_are_enforced() {
     // The limit applies to external buffers too.
     let dir = tempfile::tempdir().unwrap();
     let gltf = write_external_buffer_gltf(dir.path());
-    let limits = ImportLimits {
-        max_file_bytes: 40,
-        ..ImportLimits::default()
-    };
+    let limits = ImportLimits { max_file_bytes: 40, ..ImportLimits::default() };
     let err = import_file(&gltf, &limits).unwrap_err();
     assert!(matches!(err.kind, ImportErrorKind::TooLarge(_)), "{err}");
 }
@@ -343,19 +237,10 @@ fn obj_two_objects_materials_by_first_use() {
         // red (first used) = 0, green = 1.
         assert_eq!(mesh.materials, vec![0, 0, 1, 0], "{name}");
         let first_object_x = triangles(&mesh)[..2].iter().flatten().all(|p| p[0] <= 1.0);
-        assert!(
-            first_object_x,
-            "{name}: the first object's triangles come first"
-        );
+        assert!(first_object_x, "{name}: the first object's triangles come first");
     }
-    assert_eq!(
-        referenced_files(&data("two_objects.obj")).unwrap(),
-        vec![data("two_objects.mtl")]
-    );
-    assert_eq!(
-        referenced_files(&data("missing_mtl.obj")).unwrap(),
-        Vec::<PathBuf>::new()
-    );
+    assert_eq!(referenced_files(&data("two_objects.obj")).unwrap(), vec![data("two_objects.mtl")]);
+    assert_eq!(referenced_files(&data("missing_mtl.obj")).unwrap(), Vec::<PathBuf>::new());
 }
 
 #[test]
@@ -380,20 +265,14 @@ fn obj_attribute_missing_on_some_faces_is_dropped() {
     assert_eq!(mesh.triangle_count(), 2);
     assert!(mesh.uvs.is_none());
     let normals = mesh.normals.unwrap();
-    assert!(
-        normals.iter().all(|n| *n == [0.0, 0.0, 1.0]),
-        "renormalised"
-    );
+    assert!(normals.iter().all(|n| *n == [0.0, 0.0, 1.0]), "renormalised");
 }
 
 #[test]
 fn obj_with_malformed_mtl_imports() {
     let mesh = import_ok(&data("broken_mtl.obj"));
     assert_eq!(mesh.materials, vec![0]);
-    assert_eq!(
-        referenced_files(&data("broken_mtl.obj")).unwrap(),
-        vec![data("broken_mtl.mtl")]
-    );
+    assert_eq!(referenced_files(&data("broken_mtl.obj")).unwrap(), vec![data("broken_mtl.mtl")]);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -405,24 +284,15 @@ fn gltf_two_primitives_under_a_node_transform() {
     let mesh = import_ok(&path);
     assert_eq!(mesh.triangle_count(), 2);
     // Node: scale 2, then translate x by 10.
-    let expected = [
-        [10.0, 0.0, 0.0],
-        [12.0, 0.0, 0.0],
-        [10.0, 2.0, 0.0],
-        [10.0, 0.0, 2.0],
-        [12.0, 0.0, 2.0],
-        [10.0, 2.0, 2.0],
-    ];
+    let expected =
+        [[10.0, 0.0, 0.0], [12.0, 0.0, 0.0], [10.0, 2.0, 0.0], [10.0, 0.0, 2.0], [12.0, 0.0, 2.0], [10.0, 2.0, 2.0]];
     assert_eq!(mesh.positions, expected);
     // Primitive 0 has material 0; primitive 1 none: one past the last material.
     assert_eq!(mesh.materials, vec![0, 1]);
     // Only primitive 0 has TEXCOORD_0: dropped; both have NORMAL.
     assert!(mesh.uvs.is_none());
     assert!(mesh.normals.unwrap().iter().all(|n| *n == [0.0, 0.0, 1.0]));
-    assert!(
-        referenced_files(&path).unwrap().is_empty(),
-        "data: URIs only"
-    );
+    assert!(referenced_files(&path).unwrap().is_empty(), "data: URIs only");
 }
 
 #[test]
@@ -436,10 +306,7 @@ fn gltf_strip_and_fan() {
     // Every fan triangle has the centre (3.5, 0.5), stored last, as a corner.
     assert!(tris[3..].iter().all(|t| t.contains(&[3.5, 0.5, 0.0])));
     let area: f32 = tris.iter().map(|t| geometric_normal(t)[2] / 2.0).sum();
-    assert!(
-        (area - 2.25).abs() < 1e-5,
-        "strip 1.5 + fan 0.75, got {area}"
-    );
+    assert!((area - 2.25).abs() < 1e-5, "strip 1.5 + fan 0.75, got {area}");
 }
 
 #[test]
@@ -457,15 +324,9 @@ fn gltf_instances_flattened_and_mirror_keeps_winding() {
     for (t, corners) in triangles(&mesh).iter().zip(mesh.indices.chunks_exact(3)) {
         assert!(t.iter().all(|p| p[2] == 5.0), "parent translation applied");
         let n = normals[corners[0] as usize];
-        assert!(
-            dot(geometric_normal(t), n) > 0.0,
-            "winding agrees with normal"
-        );
+        assert!(dot(geometric_normal(t), n) > 0.0, "winding agrees with normal");
     }
-    assert!(
-        mesh.positions.iter().any(|p| p[0] < 0.0),
-        "mirrored instance"
-    );
+    assert!(mesh.positions.iter().any(|p| p[0] < 0.0), "mirrored instance");
 }
 
 #[test]
@@ -474,12 +335,7 @@ fn gltf_interleaved_attributes_and_sparse_positions() {
     assert_eq!(mesh.triangle_count(), 2);
     // byteStride 24: positions and normals interleaved; vertex 2 replaced by the sparse
     // accessor's value.
-    let expected = [
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [2.0, 2.0, 0.0],
-        [0.0, 1.0, 0.0],
-    ];
+    let expected = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 2.0, 0.0], [0.0, 1.0, 0.0]];
     assert_eq!(mesh.positions, expected);
     assert_eq!(mesh.normals.unwrap(), vec![[0.0, 0.0, 1.0]; 4]);
 }
@@ -502,9 +358,7 @@ fn triangle_buffer() -> Vec<u8> {
 
 /// glTF JSON for [`triangle_buffer`]; `uri` is the buffer URI, or none for GLB's BIN chunk.
 fn triangle_json(uri: Option<&str>) -> String {
-    let uri = uri
-        .map(|u| format!(r#", "uri": "{u}""#))
-        .unwrap_or_default();
+    let uri = uri.map(|u| format!(r#", "uri": "{u}""#)).unwrap_or_default();
     format!(
         r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}],
         "nodes": [{{"mesh": 0, "translation": [0, 0, 1]}}],
@@ -533,21 +387,12 @@ fn gltf_external_buffer_with_percent_encoded_uri() {
     let dir = tempfile::tempdir().unwrap();
     let gltf = write_external_buffer_gltf(dir.path());
     let mesh = import_ok(&gltf);
-    assert_eq!(
-        mesh.positions,
-        [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]]
-    );
-    assert_eq!(
-        referenced_files(&gltf).unwrap(),
-        vec![dir.path().join("sub dir").join("tri data.bin")]
-    );
+    assert_eq!(mesh.positions, [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]]);
+    assert_eq!(referenced_files(&gltf).unwrap(), vec![dir.path().join("sub dir").join("tri data.bin")]);
     // The buffer file gone: an error naming the glTF file and the URI.
     std::fs::remove_file(dir.path().join("sub dir/tri data.bin")).unwrap();
     let err = import(&gltf).unwrap_err();
-    assert!(
-        matches!(err.kind, ImportErrorKind::BufferIo { .. }),
-        "{err}"
-    );
+    assert!(matches!(err.kind, ImportErrorKind::BufferIo { .. }), "{err}");
     assert!(err.to_string().contains("scene.gltf") && err.to_string().contains("tri%20data"));
 }
 
@@ -556,15 +401,8 @@ fn glb_with_binary_chunk() {
     // triangle.glb: the glTF of `triangle_json` with the buffer in the BIN chunk.
     let path = data("triangle.glb");
     let mesh = import_ok(&path);
-    assert_eq!(
-        mesh.positions,
-        [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]]
-    );
-    assert_eq!(
-        mesh.materials,
-        vec![0],
-        "no materials: index 0 = one past the last"
-    );
+    assert_eq!(mesh.positions, [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]]);
+    assert_eq!(mesh.materials, vec![0], "no materials: index 0 = one past the last");
     assert!(mesh.normals.is_none() && mesh.uvs.is_none());
     assert!(referenced_files(&path).unwrap().is_empty());
 }
@@ -595,10 +433,7 @@ fn check_real_mesh(name: &str, triangles: usize) {
     );
     assert_eq!(imported as u64 + mesh.degenerate_dropped, triangles as u64);
     let (lo, hi) = mesh.bounds().unwrap();
-    assert!(
-        (0..3).all(|k| lo[k] < hi[k]),
-        "{name}: flat bounds {lo:?} {hi:?}"
-    );
+    assert!((0..3).all(|k| lo[k] < hi[k]), "{name}: flat bounds {lo:?} {hi:?}");
 }
 
 #[test]

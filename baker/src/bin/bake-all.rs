@@ -41,9 +41,8 @@ fn main() -> ExitCode {
 
 /// Mesh files under `root`, sorted; other files are counted.
 fn walk(root: &Path, found: &mut Vec<PathBuf>, skipped: &mut usize) -> Result<()> {
-    let mut entries: Vec<_> = std::fs::read_dir(root)
-        .with_context(|| format!("{}", root.display()))?
-        .collect::<Result<_, _>>()?;
+    let mut entries: Vec<_> =
+        std::fs::read_dir(root).with_context(|| format!("{}", root.display()))?.collect::<Result<_, _>>()?;
     entries.sort_by_key(|e| e.path());
     for e in entries {
         let path = e.path();
@@ -60,9 +59,7 @@ fn walk(root: &Path, found: &mut Vec<PathBuf>, skipped: &mut usize) -> Result<()
 
 fn run(cli: Cli) -> Result<ExitCode> {
     if let Some(jobs) = cli.jobs {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(jobs.max(1))
-            .build_global()?;
+        rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global()?;
     }
     let root_config = cli.input.join("pipeline.toml");
     let config = match (&cli.config, root_config.is_file()) {
@@ -71,17 +68,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
         (None, false) => PipelineConfig::parse(DEFAULT_PIPELINE_TOML, "embedded pipeline.toml"),
     }
     .map_err(anyhow::Error::msg)?;
-    let out_dir = cli
-        .output
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(&config.output.dir));
+    let out_dir = cli.output.clone().unwrap_or_else(|| PathBuf::from(&config.output.dir));
 
     let (root, files, skipped) = if cli.input.is_file() {
-        (
-            cli.input.parent().unwrap_or(Path::new(".")).to_path_buf(),
-            vec![cli.input.clone()],
-            0,
-        )
+        (cli.input.parent().unwrap_or(Path::new(".")).to_path_buf(), vec![cli.input.clone()], 0)
     } else {
         let mut files = Vec::new();
         let mut skipped = 0;
@@ -142,9 +132,5 @@ fn run(cli: Cli) -> Result<ExitCode> {
         "baked {baked}, failed {failed}, skipped {skipped} non-mesh files; {tris_in} triangles in, {bytes_out} bytes out; {:.1}s",
         start.elapsed().as_secs_f64()
     );
-    Ok(if failed == 0 {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::from(1)
-    })
+    Ok(if failed == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }

@@ -10,11 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(
-    name = "mres",
-    version,
-    about = "Validate, inspect, export and benchmark .mres cluster-DAG files"
-)]
+#[command(name = "mres", version, about = "Validate, inspect, export and benchmark .mres cluster-DAG files")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -100,11 +96,8 @@ enum Command {
 }
 
 fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| e.to_string())?;
+    let v: Vec<f32> =
+        s.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
     v.try_into().map_err(|_| "expected x,y,z".to_string())
 }
 
@@ -124,22 +117,10 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
-        Command::Validate {
-            file,
-            random_cuts,
-            seed,
-            json,
-        } => {
+        Command::Validate { file, random_cuts, seed, json } => {
             let f = open(&file)?;
-            let report = validate(
-                &f,
-                &ValidateOptions {
-                    random_cuts,
-                    seed,
-                    ..Default::default()
-                },
-            )
-            .with_context(|| format!("{}", file.display()))?;
+            let report = validate(&f, &ValidateOptions { random_cuts, seed, ..Default::default() })
+                .with_context(|| format!("{}", file.display()))?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {
@@ -155,47 +136,27 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     "levels {}  root groups {}  root clusters {}  level-0 fill {:.1}",
                     report.levels, report.root_groups, report.root_clusters, report.level0_fill
                 );
-                println!(
-                    "{:>5} {:>9} {:>8} {:>11}",
-                    "level", "clusters", "groups", "triangles"
-                );
+                println!("{:>5} {:>9} {:>8} {:>11}", "level", "clusters", "groups", "triangles");
                 for l in &report.per_level {
-                    println!(
-                        "{:>5} {:>9} {:>8} {:>11}",
-                        l.level, l.clusters, l.groups, l.triangles
-                    );
+                    println!("{:>5} {:>9} {:>8} {:>11}", l.level, l.clusters, l.groups, l.triangles);
                 }
                 println!(
                     "cuts checked: {} uniform, {} random; cracked {}; relations checked {}",
-                    report.uniform_cuts,
-                    report.random_cuts,
-                    report.cracked_cuts,
-                    report.relations_checked
+                    report.uniform_cuts, report.random_cuts, report.cracked_cuts, report.relations_checked
                 );
                 for v in &report.violations {
                     println!("VIOLATION {}: {v}", file.display());
                 }
                 println!("{}", if report.ok() { "OK" } else { "FAILED" });
             }
-            Ok(if report.ok() {
-                ExitCode::SUCCESS
-            } else {
-                ExitCode::from(1)
-            })
+            Ok(if report.ok() { ExitCode::SUCCESS } else { ExitCode::from(1) })
         }
         Command::Inspect { file, json } => {
             let f = open(&file)?;
             inspect(&f, json)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Export {
-            file,
-            error,
-            camera,
-            tau,
-            height,
-            output,
-        } => {
+        Command::Export { file, error, camera, tau, height, output } => {
             let f = open(&file)?;
             let cut = match (error, camera, tau) {
                 (Some(e), None, _) => select::uniform_cut(&f.groups, &f.clusters, e),
@@ -215,21 +176,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let mut out = std::io::BufWriter::new(
                 std::fs::File::create(&output).with_context(|| format!("{}", output.display()))?,
             );
-            formats::obj_write::write_obj(&mesh, &mut out)
-                .with_context(|| format!("{}", output.display()))?;
-            eprintln!(
-                "{}: {} clusters, {} triangles",
-                output.display(),
-                cut.len(),
-                mesh.triangle_count()
-            );
+            formats::obj_write::write_obj(&mesh, &mut out).with_context(|| format!("{}", output.display()))?;
+            eprintln!("{}: {} clusters, {} triangles", output.display(), cut.len(), mesh.triangle_count());
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench {
-            input,
-            repeat,
-            json,
-        } => bench(&input, repeat.max(1), json),
+        Command::Bench { input, repeat, json } => bench(&input, repeat.max(1), json),
         Command::BenchChild { builder, input } => {
             let settings = BakeSettings::default();
             let mesh = formats::import::import_file(&input, &Default::default())?;
@@ -260,11 +211,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
 
 fn inspect(f: &MresFile, json: bool) -> Result<()> {
     let h = &f.header;
-    let level0 = f
-        .clusters
-        .iter()
-        .filter(|c| c.own_group == NO_GROUP)
-        .count();
+    let level0 = f.clusters.iter().filter(|c| c.own_group == NO_GROUP).count();
     let raw: u64 = f.pages.iter().map(|p| p.raw_size as u64).sum();
     let value = serde_json::json!({
         "flags": h.flags, "grid_origin": h.grid.origin, "grid_step": h.grid.step,
@@ -290,16 +237,9 @@ fn bench(input: &Path, repeat: usize, json: bool) -> Result<ExitCode> {
     for builder in ["mres", "clusterlod"] {
         let mut runs = Vec::new();
         for _ in 0..repeat {
-            let out = std::process::Command::new(&exe)
-                .args(["bench-child", builder])
-                .arg(input)
-                .output()?;
+            let out = std::process::Command::new(&exe).args(["bench-child", builder]).arg(input).output()?;
             if !out.status.success() {
-                bail!(
-                    "{builder} on {}: {}",
-                    input.display(),
-                    String::from_utf8_lossy(&out.stderr)
-                );
+                bail!("{builder} on {}: {}", input.display(), String::from_utf8_lossy(&out.stderr));
             }
             runs.push(serde_json::from_slice::<BuilderRun>(&out.stdout)?);
         }
@@ -312,11 +252,7 @@ fn bench(input: &Path, repeat: usize, json: bool) -> Result<ExitCode> {
         println!("{}", serde_json::to_string_pretty(&best)?);
         return Ok(ExitCode::SUCCESS);
     }
-    println!(
-        "{} ({} triangles), min over {repeat} run(s)",
-        input.display(),
-        best[0].input_triangles
-    );
+    println!("{} ({} triangles), min over {repeat} run(s)", input.display(), best[0].input_triangles);
     println!(
         "{:<11} {:>8} {:>10} {:>8} {:>6} {:>6} {:>6}  triangles per uniform cut at {:?} × diagonal",
         "builder", "seconds", "peak MiB", "B/tri", "levels", "roots", "fill", CUT_THRESHOLDS
@@ -333,10 +269,7 @@ fn bench(input: &Path, repeat: usize, json: bool) -> Result<ExitCode> {
             r.level0_fill,
             r.cut_triangles,
             if r.bytes > 0 {
-                format!(
-                    "  file {:.2} B/input tri",
-                    r.bytes as f64 / r.input_triangles.max(1) as f64
-                )
+                format!("  file {:.2} B/input tri", r.bytes as f64 / r.input_triangles.max(1) as f64)
             } else {
                 String::new()
             }

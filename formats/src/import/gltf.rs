@@ -25,8 +25,8 @@ use ::gltf::{json, Accessor, Document, Primitive, Semantic};
 use base64::Engine as _;
 
 use super::{
-    asset_dir, check_triangle_count, check_vertex_count, read_file, resolve_inside,
-    ImportErrorKind, ImportLimits, InputKind, KindResult, MeshBuilder,
+    asset_dir, check_triangle_count, check_vertex_count, read_file, resolve_inside, ImportErrorKind, ImportLimits,
+    InputKind, KindResult, MeshBuilder,
 };
 use crate::SourceMesh;
 
@@ -37,12 +37,7 @@ const MAX_NODE_INSTANCES: u64 = 1 << 24;
 /// Column-major 4×4 matrix, as glTF stores it (`m[column][row]`).
 type Mat4 = [[f32; 4]; 4];
 
-const IDENTITY: Mat4 = [
-    [1.0, 0.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0, 0.0],
-    [0.0, 0.0, 1.0, 0.0],
-    [0.0, 0.0, 0.0, 1.0],
-];
+const IDENTITY: Mat4 = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
 
 /// One mesh placed in the scene.
 struct Instance {
@@ -66,12 +61,7 @@ struct Plan {
 type Buffers<'a> = Vec<Option<Cow<'a, [u8]>>>;
 
 /// Imports a `.gltf` or `.glb` file whose bytes are `bytes` (not empty, size-checked).
-pub(super) fn import(
-    path: &Path,
-    bytes: &[u8],
-    kind: InputKind,
-    limits: &ImportLimits,
-) -> KindResult<SourceMesh> {
+pub(super) fn import(path: &Path, bytes: &[u8], kind: InputKind, limits: &ImportLimits) -> KindResult<SourceMesh> {
     let (json_bytes, bin) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
     let instances = scene_instances(&document)?;
@@ -81,11 +71,7 @@ pub(super) fn import(
 }
 
 /// The external buffer files the import of this glTF reads (see `import::referenced_files`).
-pub(super) fn referenced_files(
-    path: &Path,
-    bytes: &[u8],
-    kind: InputKind,
-) -> KindResult<Vec<PathBuf>> {
+pub(super) fn referenced_files(path: &Path, bytes: &[u8], kind: InputKind) -> KindResult<Vec<PathBuf>> {
     let (json_bytes, _) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
     let instances = scene_instances(&document)?;
@@ -112,9 +98,7 @@ fn split_container(bytes: &[u8], kind: InputKind) -> KindResult<(&[u8], Option<&
     if bytes.starts_with(b"glTF") {
         split_glb(bytes)
     } else if kind == InputKind::Glb {
-        Err(ImportErrorKind::Parse(
-            "not a GLB file (no \"glTF\" magic)".into(),
-        ))
+        Err(ImportErrorKind::Parse("not a GLB file (no \"glTF\" magic)".into()))
     } else {
         Ok((bytes, None))
     }
@@ -134,16 +118,12 @@ fn split_glb(bytes: &[u8]) -> KindResult<(&[u8], Option<&[u8]>)> {
         return Err(parse(format!("unsupported version {version}")));
     }
     if length < 12 || length > bytes.len() {
-        return Err(parse(format!(
-            "header declares {length} bytes, the file has {} (truncated?)",
-            bytes.len()
-        )));
+        return Err(parse(format!("header declares {length} bytes, the file has {} (truncated?)", bytes.len())));
     }
     let body = &bytes[12..length];
     let (mut json, mut bin) = (None, None);
     let mut at = 0;
-    while let (Some(chunk_length), Some(chunk_type)) = (u32_at(body, at), body.get(at + 4..at + 8))
-    {
+    while let (Some(chunk_length), Some(chunk_type)) = (u32_at(body, at), body.get(at + 4..at + 8)) {
         let start = at + 8;
         let data = start
             .checked_add(chunk_length)
@@ -172,17 +152,9 @@ fn parse_document(json_bytes: &[u8]) -> KindResult<Document> {
     prepare_positions(&mut root)?;
     Document::from_json(root).map_err(|e| match e {
         ::gltf::Error::Validation(errors) => {
-            let first: Vec<String> = errors
-                .iter()
-                .take(3)
-                .map(|(path, error)| format!("{path}: {error}"))
-                .collect();
+            let first: Vec<String> = errors.iter().take(3).map(|(path, error)| format!("{path}: {error}")).collect();
             let more = errors.len().saturating_sub(first.len());
-            let more = if more > 0 {
-                format!(" (and {more} more)")
-            } else {
-                String::new()
-            };
+            let more = if more > 0 { format!(" (and {more} more)") } else { String::new() };
             ImportErrorKind::Parse(format!("invalid glTF: {}{more}", first.join("; ")))
         }
         other => ImportErrorKind::Parse(format!("invalid glTF: {other}")),
@@ -226,21 +198,13 @@ fn scene_instances(document: &Document) -> KindResult<Vec<Instance>> {
     if document.meshes().len() == 0 {
         return Err(ImportErrorKind::NoMeshes);
     }
-    let Some(scene) = document
-        .default_scene()
-        .or_else(|| document.scenes().next())
-    else {
-        let all = document.meshes().map(|mesh| Instance {
-            mesh: mesh.index(),
-            transform: IDENTITY,
-        });
+    let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
+        let all = document.meshes().map(|mesh| Instance { mesh: mesh.index(), transform: IDENTITY });
         return Ok(all.collect());
     };
     // Size the expansion before doing it (this also rejects cycles).
     let expanded = expanded_sizes(document)?;
-    let total = scene
-        .nodes()
-        .fold(0u64, |sum, n| sum.saturating_add(expanded[n.index()]));
+    let total = scene.nodes().fold(0u64, |sum, n| sum.saturating_add(expanded[n.index()]));
     if total > MAX_NODE_INSTANCES {
         return Err(ImportErrorKind::TooLarge(format!(
             "the scene expands to {total} node instances, the limit is {MAX_NODE_INSTANCES}"
@@ -252,10 +216,7 @@ fn scene_instances(document: &Document) -> KindResult<Vec<Instance>> {
     while let Some((node, parent)) = stack.pop() {
         let world = multiply(&parent, &node.transform().matrix());
         if let Some(mesh) = node.mesh() {
-            instances.push(Instance {
-                mesh: mesh.index(),
-                transform: world,
-            });
+            instances.push(Instance { mesh: mesh.index(), transform: world });
         }
         let children: Vec<_> = node.children().collect();
         stack.extend(children.into_iter().rev().map(|child| (child, world)));
@@ -276,9 +237,7 @@ fn expanded_sizes(document: &Document) -> KindResult<Vec<u64>> {
     let nodes: Vec<_> = document.nodes().collect();
     let mut size = vec![0u64; nodes.len()];
     let mut state = vec![State::New; nodes.len()];
-    let cycle = |node: usize| {
-        ImportErrorKind::Parse(format!("node hierarchy has a cycle through node {node}"))
-    };
+    let cycle = |node: usize| ImportErrorKind::Parse(format!("node hierarchy has a cycle through node {node}"));
     for root in 0..nodes.len() {
         // (node, whether its children are done)
         let mut stack = vec![(root, false)];
@@ -330,32 +289,23 @@ fn plan(document: &Document, instances: &[Instance], limits: &ImportLimits) -> K
         let copies = instance_count[mesh.index()];
         for primitive in mesh.primitives() {
             let mode = primitive.mode();
-            if !matches!(
-                mode,
-                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-            ) {
+            if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
                 skipped_modes.push(format!("{mode:?}"));
                 continue;
             }
             let sizes = check_primitive(&primitive, &mut plan)?;
             plan.primitives[mesh.index()].push(primitive.index());
             plan.vertices = plan.vertices.saturating_add(sizes.0.saturating_mul(copies));
-            plan.triangles = plan
-                .triangles
-                .saturating_add(sizes.1.saturating_mul(copies));
+            plan.triangles = plan.triangles.saturating_add(sizes.1.saturating_mul(copies));
         }
     }
     if plan.primitives.iter().all(Vec::is_empty) {
         if skipped_modes.is_empty() {
-            return Err(ImportErrorKind::NoTriangles {
-                degenerate_dropped: 0,
-            });
+            return Err(ImportErrorKind::NoTriangles { degenerate_dropped: 0 });
         }
         skipped_modes.sort_unstable();
         skipped_modes.dedup();
-        return Err(ImportErrorKind::UnsupportedPrimitiveMode(
-            skipped_modes.join(", "),
-        ));
+        return Err(ImportErrorKind::UnsupportedPrimitiveMode(skipped_modes.join(", ")));
     }
     check_triangle_count(plan.triangles, limits)?;
     check_vertex_count(plan.vertices, limits)?;
@@ -365,9 +315,9 @@ fn plan(document: &Document, instances: &[Instance], limits: &ImportLimits) -> K
 /// Checks the accessors of a triangle primitive; returns its (vertex, triangle) counts and
 /// records in `plan` the buffers it reads and whether it has normals and UVs.
 fn check_primitive(primitive: &Primitive, plan: &mut Plan) -> KindResult<(u64, u64)> {
-    let positions = primitive.get(&Semantic::Positions).ok_or_else(|| {
-        ImportErrorKind::Parse(format!("primitive {} has no POSITION", primitive.index()))
-    })?;
+    let positions = primitive
+        .get(&Semantic::Positions)
+        .ok_or_else(|| ImportErrorKind::Parse(format!("primitive {} has no POSITION", primitive.index())))?;
     let vertices = check_accessor(&positions, Use::Position, &mut plan.used_buffers)?;
     for (semantic, use_, present) in [
         (Semantic::Normals, Use::Normal, &mut plan.has_normals),
@@ -408,23 +358,12 @@ enum Use {
 /// Checks that the crate's reader can read `accessor` as `use_` without panicking or
 /// reading past the declared data; returns its element count and marks its buffers used.
 fn check_accessor(accessor: &Accessor, use_: Use, used_buffers: &mut [bool]) -> KindResult<usize> {
-    let fail = |reason: String| ImportErrorKind::InvalidAccessor {
-        accessor: accessor.index(),
-        reason,
-    };
+    let fail = |reason: String| ImportErrorKind::InvalidAccessor { accessor: accessor.index(), reason };
     let (dimensions, types, name): (_, &[DataType], _) = match use_ {
         Use::Position => (Dimensions::Vec3, &[DataType::F32], "POSITION"),
         Use::Normal => (Dimensions::Vec3, &[DataType::F32], "NORMAL"),
-        Use::TexCoord => (
-            Dimensions::Vec2,
-            &[DataType::F32, DataType::U8, DataType::U16],
-            "TEXCOORD_0",
-        ),
-        Use::Index => (
-            Dimensions::Scalar,
-            &[DataType::U8, DataType::U16, DataType::U32],
-            "indices",
-        ),
+        Use::TexCoord => (Dimensions::Vec2, &[DataType::F32, DataType::U8, DataType::U16], "TEXCOORD_0"),
+        Use::Index => (Dimensions::Scalar, &[DataType::U8, DataType::U16, DataType::U32], "indices"),
     };
     if accessor.dimensions() != dimensions || !types.contains(&accessor.data_type()) {
         return Err(fail(format!(
@@ -435,29 +374,16 @@ fn check_accessor(accessor: &Accessor, use_: Use, used_buffers: &mut [bool]) -> 
     }
     let count = accessor.count();
     let element = accessor.size();
-    let view = accessor.view().ok_or_else(|| {
-        fail("no bufferView (implicitly zero accessors are not supported)".into())
-    })?;
+    let view =
+        accessor.view().ok_or_else(|| fail("no bufferView (implicitly zero accessors are not supported)".into()))?;
     check_range(&view, accessor.offset(), count, element, used_buffers).map_err(&fail)?;
     if let Some(sparse) = accessor.sparse() {
         let (indices, values) = (sparse.indices(), sparse.values());
         let index_size = indices.index_type().size();
-        check_range(
-            &indices.view(),
-            indices.offset(),
-            sparse.count(),
-            index_size,
-            used_buffers,
-        )
-        .map_err(|e| fail(format!("sparse indices: {e}")))?;
-        check_range(
-            &values.view(),
-            values.offset(),
-            sparse.count(),
-            element,
-            used_buffers,
-        )
-        .map_err(|e| fail(format!("sparse values: {e}")))?;
+        check_range(&indices.view(), indices.offset(), sparse.count(), index_size, used_buffers)
+            .map_err(|e| fail(format!("sparse indices: {e}")))?;
+        check_range(&values.view(), values.offset(), sparse.count(), element, used_buffers)
+            .map_err(|e| fail(format!("sparse values: {e}")))?;
     }
     Ok(count)
 }
@@ -538,14 +464,10 @@ fn load_buffers<'a>(
             })?),
             Source::Uri(uri) => match classify_uri(uri, dir)? {
                 UriTarget::Data(bytes) => Cow::Owned(bytes),
-                UriTarget::File(file) => {
-                    Cow::Owned(read_file(&file, limits.max_file_bytes).map_err(|error| {
-                        ImportErrorKind::BufferIo {
-                            uri: short(uri),
-                            error,
-                        }
-                    })??)
-                }
+                UriTarget::File(file) => Cow::Owned(
+                    read_file(&file, limits.max_file_bytes)
+                        .map_err(|error| ImportErrorKind::BufferIo { uri: short(uri), error })??,
+                ),
             },
         };
         if data.len() < buffer.length() {
@@ -581,15 +503,9 @@ fn classify_uri(uri: &str, dir: &Path) -> KindResult<UriTarget> {
         }
         return Err(ImportErrorKind::UnsupportedUri(short(uri)));
     }
-    let decoded = percent_decode(uri).ok_or_else(|| {
-        ImportErrorKind::Parse(format!(
-            "malformed percent-encoding in URI {:?}",
-            short(uri)
-        ))
-    })?;
-    resolve_inside(dir, &decoded)
-        .map(UriTarget::File)
-        .ok_or_else(|| ImportErrorKind::UriOutsideAssetDir(short(uri)))
+    let decoded = percent_decode(uri)
+        .ok_or_else(|| ImportErrorKind::Parse(format!("malformed percent-encoding in URI {:?}", short(uri))))?;
+    resolve_inside(dir, &decoded).map(UriTarget::File).ok_or_else(|| ImportErrorKind::UriOutsideAssetDir(short(uri)))
 }
 
 /// The scheme of an absolute URI (RFC 3986: a letter, then letters, digits, `+-.`, then
@@ -604,9 +520,8 @@ fn uri_scheme(uri: &str) -> Option<&str> {
 
 /// Decodes `data:[<media type>];base64,<data>`; other `data:` encodings are not supported.
 fn decode_data_uri(uri: &str) -> KindResult<Vec<u8>> {
-    let (header, payload) = uri
-        .split_once(',')
-        .ok_or_else(|| ImportErrorKind::Parse(format!("malformed data URI {:?}", short(uri))))?;
+    let (header, payload) =
+        uri.split_once(',').ok_or_else(|| ImportErrorKind::Parse(format!("malformed data URI {:?}", short(uri))))?;
     if !header.to_ascii_lowercase().ends_with(";base64") {
         return Err(ImportErrorKind::UnsupportedUri(short(uri)));
     }
@@ -615,9 +530,7 @@ fn decode_data_uri(uri: &str) -> KindResult<Vec<u8>> {
         base64::engine::GeneralPurposeConfig::new()
             .with_decode_padding_mode(base64::engine::DecodePaddingMode::Indifferent),
     );
-    engine
-        .decode(payload)
-        .map_err(|e| ImportErrorKind::Parse(format!("invalid base64 in data URI: {e}")))
+    engine.decode(payload).map_err(|e| ImportErrorKind::Parse(format!("invalid base64 in data URI: {e}")))
 }
 
 /// Decodes `%XX` escapes; `None` for a malformed escape or a result that is not UTF-8.
@@ -651,20 +564,10 @@ fn short(uri: &str) -> String {
 }
 
 /// Reads every planned primitive of every instance into one mesh.
-fn read_mesh(
-    document: &Document,
-    instances: &[Instance],
-    plan: &Plan,
-    buffers: &Buffers,
-) -> KindResult<SourceMesh> {
+fn read_mesh(document: &Document, instances: &[Instance], plan: &Plan, buffers: &Buffers) -> KindResult<SourceMesh> {
     let meshes: Vec<_> = document.meshes().collect();
     let unassigned_material = document.materials().len() as u32;
-    let mut builder = MeshBuilder::new(
-        plan.has_normals,
-        plan.has_uvs,
-        plan.vertices as usize,
-        plan.triangles as usize,
-    );
+    let mut builder = MeshBuilder::new(plan.has_normals, plan.has_uvs, plan.vertices as usize, plan.triangles as usize);
     for instance in instances {
         let transform = Transform::new(&instance.transform);
         let primitives: Vec<_> = meshes[instance.mesh].primitives().collect();
@@ -695,41 +598,24 @@ fn read_primitive(
         reason: "could not be read".into(),
     };
 
-    let positions = reader
-        .read_positions()
-        .ok_or_else(|| unreadable(primitive.get(&Semantic::Positions)))?;
+    let positions = reader.read_positions().ok_or_else(|| unreadable(primitive.get(&Semantic::Positions)))?;
     let mut normals = match builder.has_normals() {
-        true => Some(
-            reader
-                .read_normals()
-                .ok_or_else(|| unreadable(primitive.get(&Semantic::Normals)))?,
-        ),
+        true => Some(reader.read_normals().ok_or_else(|| unreadable(primitive.get(&Semantic::Normals)))?),
         false => None,
     };
     let mut uvs = match builder.has_uvs() {
-        true => Some(
-            reader
-                .read_tex_coords(0)
-                .ok_or_else(|| unreadable(None))?
-                .into_f32(),
-        ),
+        true => Some(reader.read_tex_coords(0).ok_or_else(|| unreadable(None))?.into_f32()),
         false => None,
     };
     let base = builder.vertex_count();
     for (i, local) in positions.enumerate() {
         let position = transform.point(local);
         if !position.iter().all(|c| c.is_finite()) {
-            return Err(ImportErrorKind::NonFinitePosition(format!(
-                "{at} vertex {i}: {local:?} (world {position:?})"
-            )));
+            return Err(ImportErrorKind::NonFinitePosition(format!("{at} vertex {i}: {local:?} (world {position:?})")));
         }
         let normal = normals.as_mut().and_then(Iterator::next);
         let uv = uvs.as_mut().and_then(Iterator::next);
-        builder.push_vertex(
-            position,
-            normal.map_or([0.0; 3], |n| transform.normal(n)),
-            uv.unwrap_or([0.0; 2]),
-        );
+        builder.push_vertex(position, normal.map_or([0.0; 3], |n| transform.normal(n)), uv.unwrap_or([0.0; 2]));
     }
     let vertices = builder.vertex_count() - base;
 
@@ -751,11 +637,7 @@ fn read_primitive(
     let mut triangle = |a: u32, b: u32, c: u32| -> KindResult<()> {
         let (a, b, c) = (vertex(a)?, vertex(b)?, vertex(c)?);
         // A mirroring transform turns counter-clockwise into clockwise: swap back.
-        let corners = if transform.mirrors {
-            [a, c, b]
-        } else {
-            [a, b, c]
-        };
+        let corners = if transform.mirrors { [a, c, b] } else { [a, b, c] };
         builder.push_triangle(corners, material);
         Ok(())
     };
@@ -830,11 +712,7 @@ fn multiply(a: &Mat4, b: &Mat4) -> Mat4 {
 }
 
 fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -862,28 +740,13 @@ mod tests {
             "FILE:/etc/passwd",
             "C:/x.bin",
         ] {
-            assert!(
-                matches!(
-                    classify_uri(outside, dir),
-                    Err(ImportErrorKind::UriOutsideAssetDir(_))
-                ),
-                "{outside}"
-            );
+            assert!(matches!(classify_uri(outside, dir), Err(ImportErrorKind::UriOutsideAssetDir(_))), "{outside}");
         }
-        assert!(matches!(
-            classify_uri("https://example.com/x.bin", dir),
-            Err(ImportErrorKind::UnsupportedUri(_))
-        ));
-        assert!(matches!(
-            classify_uri("data:text/plain,hello", dir),
-            Err(ImportErrorKind::UnsupportedUri(_))
-        ));
+        assert!(matches!(classify_uri("https://example.com/x.bin", dir), Err(ImportErrorKind::UnsupportedUri(_))));
+        assert!(matches!(classify_uri("data:text/plain,hello", dir), Err(ImportErrorKind::UnsupportedUri(_))));
         for malformed in ["bad%zz.bin", "bad%+1.bin", "bad%4", "bad%ff.bin"] {
             let result = classify_uri(malformed, dir);
-            assert!(
-                matches!(result, Err(ImportErrorKind::Parse(_))),
-                "{malformed}"
-            );
+            assert!(matches!(result, Err(ImportErrorKind::Parse(_))), "{malformed}");
         }
         match classify_uri("data:application/octet-stream;base64,AQID", dir) {
             Ok(UriTarget::Data(bytes)) => assert_eq!(bytes, vec![1, 2, 3]),

@@ -95,10 +95,7 @@ impl ImportLimits {
     /// Defaults: 4 GiB per file (well above any scan we bake, well below what would swap a
     /// workstation) and 500 million triangles (about 16 GB of `SourceMesh` for a closed
     /// mesh, the most a single bake is expected to handle).
-    pub const DEFAULT: ImportLimits = ImportLimits {
-        max_file_bytes: 4 << 30,
-        max_triangles: 500_000_000,
-    };
+    pub const DEFAULT: ImportLimits = ImportLimits { max_file_bytes: 4 << 30, max_triangles: 500_000_000 };
 }
 
 impl Default for ImportLimits {
@@ -210,10 +207,7 @@ type KindResult<T> = Result<T, ImportErrorKind>;
 /// The [module documentation](self) says how each format's attributes, materials and
 /// degenerate triangles are handled.
 pub fn import_file(path: &Path, limits: &ImportLimits) -> Result<SourceMesh, ImportError> {
-    import_kind(path, limits).map_err(|kind| ImportError {
-        path: path.to_path_buf(),
-        kind,
-    })
+    import_kind(path, limits).map_err(|kind| ImportError { path: path.to_path_buf(), kind })
 }
 
 fn import_kind(path: &Path, limits: &ImportLimits) -> KindResult<SourceMesh> {
@@ -223,12 +217,7 @@ fn import_kind(path: &Path, limits: &ImportLimits) -> KindResult<SourceMesh> {
 }
 
 /// Imports the contents `bytes` of the file `path` (which locates external glTF buffers).
-fn import_bytes(
-    path: &Path,
-    kind: InputKind,
-    bytes: Vec<u8>,
-    limits: &ImportLimits,
-) -> KindResult<SourceMesh> {
+fn import_bytes(path: &Path, kind: InputKind, bytes: Vec<u8>, limits: &ImportLimits) -> KindResult<SourceMesh> {
     if bytes.is_empty() {
         return Err(ImportErrorKind::EmptyFile);
     }
@@ -250,10 +239,7 @@ fn import_bytes(
 /// Errors like [`import_file`] with default limits (unreadable file, bad syntax, buffer URIs
 /// outside the asset directory).
 pub fn referenced_files(path: &Path) -> Result<Vec<PathBuf>, ImportError> {
-    referenced_kind(path).map_err(|kind| ImportError {
-        path: path.to_path_buf(),
-        kind,
-    })
+    referenced_kind(path).map_err(|kind| ImportError { path: path.to_path_buf(), kind })
 }
 
 fn referenced_kind(path: &Path) -> KindResult<Vec<PathBuf>> {
@@ -277,18 +263,14 @@ fn read_file(path: &Path, max_bytes: u64) -> std::io::Result<KindResult<Vec<u8>>
     let file = File::open(path)?;
     let declared = file.metadata()?.len();
     let too_large = |size: u64| {
-        Err(ImportErrorKind::TooLarge(format!(
-            "{} is {size} bytes, the limit is {max_bytes}",
-            path.display()
-        )))
+        Err(ImportErrorKind::TooLarge(format!("{} is {size} bytes, the limit is {max_bytes}", path.display())))
     };
     if declared > max_bytes {
         return Ok(too_large(declared));
     }
     let mut bytes = Vec::with_capacity(usize::try_from(declared).unwrap_or(0));
     // Read at most one byte past the limit, in case the file grows while we read it.
-    file.take(max_bytes.saturating_add(1))
-        .read_to_end(&mut bytes)?;
+    file.take(max_bytes.saturating_add(1)).read_to_end(&mut bytes)?;
     if bytes.len() as u64 > max_bytes {
         return Ok(too_large(bytes.len() as u64));
     }
@@ -319,20 +301,13 @@ fn resolve_inside(dir: &Path, relative: &str) -> Option<PathBuf> {
         }
     }
     // A drive letter ("C:/...") is not a prefix on Unix; refuse it explicitly.
-    if parts
-        .first()
-        .is_some_and(|p| p.len() == 2 && p.ends_with(':'))
-    {
+    if parts.first().is_some_and(|p| p.len() == 2 && p.ends_with(':')) {
         return None;
     }
     if parts.is_empty() {
         return None;
     }
-    Some(
-        parts
-            .iter()
-            .fold(dir.to_path_buf(), |acc, part| acc.join(part)),
-    )
+    Some(parts.iter().fold(dir.to_path_buf(), |acc, part| acc.join(part)))
 }
 
 /// The directory relative references in `path` are resolved against.
@@ -405,9 +380,7 @@ impl MeshBuilder {
     /// The finished mesh, or [`ImportErrorKind::NoTriangles`] if no triangle survived.
     fn finish(self) -> KindResult<SourceMesh> {
         if self.mesh.materials.is_empty() {
-            return Err(ImportErrorKind::NoTriangles {
-                degenerate_dropped: self.mesh.degenerate_dropped,
-            });
+            return Err(ImportErrorKind::NoTriangles { degenerate_dropped: self.mesh.degenerate_dropped });
         }
         Ok(self.mesh)
     }
@@ -427,14 +400,9 @@ fn unit_or_zero(v: [f32; 3]) -> [f32; 3] {
 
 /// Error for a vertex count above the limits (see [`ImportLimits::max_triangles`]).
 fn check_vertex_count(vertices: u64, limits: &ImportLimits) -> KindResult<()> {
-    let max = limits
-        .max_triangles
-        .saturating_mul(3)
-        .min(u64::from(u32::MAX));
+    let max = limits.max_triangles.saturating_mul(3).min(u64::from(u32::MAX));
     if vertices > max {
-        return Err(ImportErrorKind::TooLarge(format!(
-            "{vertices} vertices, the limit is {max}"
-        )));
+        return Err(ImportErrorKind::TooLarge(format!("{vertices} vertices, the limit is {max}")));
     }
     Ok(())
 }
@@ -442,10 +410,7 @@ fn check_vertex_count(vertices: u64, limits: &ImportLimits) -> KindResult<()> {
 /// Error for a triangle count above [`ImportLimits::max_triangles`].
 fn check_triangle_count(triangles: u64, limits: &ImportLimits) -> KindResult<()> {
     if triangles > limits.max_triangles {
-        return Err(ImportErrorKind::TooLarge(format!(
-            "{triangles} triangles, the limit is {}",
-            limits.max_triangles
-        )));
+        return Err(ImportErrorKind::TooLarge(format!("{triangles} triangles, the limit is {}", limits.max_triangles)));
     }
     Ok(())
 }
@@ -456,18 +421,9 @@ mod tests {
 
     #[test]
     fn input_kind_by_extension_ignores_case() {
-        assert_eq!(
-            InputKind::from_path(Path::new("a/b.OBJ")),
-            Some(InputKind::Obj)
-        );
-        assert_eq!(
-            InputKind::from_path(Path::new("b.glTF")),
-            Some(InputKind::Gltf)
-        );
-        assert_eq!(
-            InputKind::from_path(Path::new("b.Glb")),
-            Some(InputKind::Glb)
-        );
+        assert_eq!(InputKind::from_path(Path::new("a/b.OBJ")), Some(InputKind::Obj));
+        assert_eq!(InputKind::from_path(Path::new("b.glTF")), Some(InputKind::Gltf));
+        assert_eq!(InputKind::from_path(Path::new("b.Glb")), Some(InputKind::Glb));
         assert_eq!(InputKind::from_path(Path::new("b.stl")), None);
         assert_eq!(InputKind::from_path(Path::new("obj")), None);
     }
@@ -476,14 +432,8 @@ mod tests {
     fn resolve_inside_refuses_escapes() {
         let dir = Path::new("/assets/x");
         assert_eq!(resolve_inside(dir, "a.bin"), Some(dir.join("a.bin")));
-        assert_eq!(
-            resolve_inside(dir, "./sub/../a.bin"),
-            Some(dir.join("a.bin"))
-        );
-        assert_eq!(
-            resolve_inside(dir, "sub/a.bin"),
-            Some(dir.join("sub/a.bin"))
-        );
+        assert_eq!(resolve_inside(dir, "./sub/../a.bin"), Some(dir.join("a.bin")));
+        assert_eq!(resolve_inside(dir, "sub/a.bin"), Some(dir.join("sub/a.bin")));
         for bad in [
             "../a.bin",
             "../../etc/passwd",
@@ -524,9 +474,7 @@ mod tests {
     /// masks; each import must return (`Ok` or `Err`), never panic. In-process, from memory,
     /// so that thousands of variants take well under a second.
     fn fuzz(name: &str, valid: &[u8]) {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data")
-            .join(name);
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name);
         let kind = InputKind::from_path(&path).unwrap();
         let limits = ImportLimits::default();
         assert!(import_bytes(&path, kind, valid.to_vec(), &limits).is_ok());
@@ -544,26 +492,14 @@ mod tests {
 
     #[test]
     fn fuzz_glb() {
-        fuzz(
-            "triangle.glb",
-            include_bytes!("../../tests/data/triangle.glb"),
-        );
+        fuzz("triangle.glb", include_bytes!("../../tests/data/triangle.glb"));
     }
 
     #[test]
     fn fuzz_gltf() {
-        fuzz(
-            "strip_fan.gltf",
-            include_bytes!("../../tests/data/strip_fan.gltf"),
-        );
-        fuzz(
-            "interleaved_sparse.gltf",
-            include_bytes!("../../tests/data/interleaved_sparse.gltf"),
-        );
-        fuzz(
-            "two_primitives_transform.gltf",
-            include_bytes!("../../tests/data/two_primitives_transform.gltf"),
-        );
+        fuzz("strip_fan.gltf", include_bytes!("../../tests/data/strip_fan.gltf"));
+        fuzz("interleaved_sparse.gltf", include_bytes!("../../tests/data/interleaved_sparse.gltf"));
+        fuzz("two_primitives_transform.gltf", include_bytes!("../../tests/data/two_primitives_transform.gltf"));
     }
 
     /// Replaces each number in a glTF's JSON with values chosen to break size arithmetic
@@ -585,26 +521,13 @@ mod tests {
             "-1e30",
         ];
         let files = [
-            (
-                "strip_fan.gltf",
-                include_str!("../../tests/data/strip_fan.gltf"),
-            ),
-            (
-                "interleaved_sparse.gltf",
-                include_str!("../../tests/data/interleaved_sparse.gltf"),
-            ),
+            ("strip_fan.gltf", include_str!("../../tests/data/strip_fan.gltf")),
+            ("interleaved_sparse.gltf", include_str!("../../tests/data/interleaved_sparse.gltf")),
         ];
         for (name, text) in files {
-            let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("tests/data")
-                .join(name);
+            let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name);
             let import = |text: String| {
-                let _ = import_bytes(
-                    &path,
-                    InputKind::Gltf,
-                    text.into_bytes(),
-                    &Default::default(),
-                );
+                let _ = import_bytes(&path, InputKind::Gltf, text.into_bytes(), &Default::default());
             };
             // Numbers after the buffers (whose data URI would only change buffer bytes).
             let bytes = text.as_bytes();
@@ -627,28 +550,14 @@ mod tests {
 
     #[test]
     fn fuzz_obj() {
-        fuzz(
-            "partial_uvs.obj",
-            include_bytes!("../../tests/data/partial_uvs.obj"),
-        );
-        fuzz(
-            "quads_ngon.obj",
-            include_bytes!("../../tests/data/quads_ngon.obj"),
-        );
-        fuzz(
-            "two_objects.obj",
-            include_bytes!("../../tests/data/two_objects.obj"),
-        );
+        fuzz("partial_uvs.obj", include_bytes!("../../tests/data/partial_uvs.obj"));
+        fuzz("quads_ngon.obj", include_bytes!("../../tests/data/quads_ngon.obj"));
+        fuzz("two_objects.obj", include_bytes!("../../tests/data/two_objects.obj"));
     }
 
     #[test]
     fn empty_builder_is_no_triangles() {
         let b = MeshBuilder::new(false, false, 0, 0);
-        assert!(matches!(
-            b.finish(),
-            Err(ImportErrorKind::NoTriangles {
-                degenerate_dropped: 0
-            })
-        ));
+        assert!(matches!(b.finish(), Err(ImportErrorKind::NoTriangles { degenerate_dropped: 0 })));
     }
 }

@@ -20,8 +20,8 @@ use std::io::{BufRead, Cursor, Read};
 use std::path::{Path, PathBuf};
 
 use super::{
-    asset_dir, check_triangle_count, check_vertex_count, resolve_inside, ImportErrorKind,
-    ImportLimits, KindResult, MeshBuilder,
+    asset_dir, check_triangle_count, check_vertex_count, resolve_inside, ImportErrorKind, ImportLimits, KindResult,
+    MeshBuilder,
 };
 use crate::SourceMesh;
 
@@ -56,30 +56,16 @@ pub(super) fn import(mut bytes: Vec<u8>, limits: &ImportLimits) -> KindResult<So
 
     // Every usemtl name resolves to its first-use index through one synthetic material
     // library, announced by a synthetic first line (the real `mtllib` lines are blanked).
-    let materials: Vec<tobj::Material> = scan
-        .material_names
-        .iter()
-        .map(|name| tobj::Material {
-            name: name.clone(),
-            ..Default::default()
-        })
-        .collect();
+    let materials: Vec<tobj::Material> =
+        scan.material_names.iter().map(|name| tobj::Material { name: name.clone(), ..Default::default() }).collect();
     let load_materials = |_: &Path| -> tobj::MTLLoadResult {
         let by_name = materials.iter().enumerate();
-        Ok((
-            materials.clone(),
-            by_name.map(|(i, m)| (m.name.clone(), i)).collect(),
-        ))
+        Ok((materials.clone(), by_name.map(|(i, m)| (m.name.clone(), i)).collect()))
     };
-    let options = tobj::LoadOptions {
-        single_index: true,
-        triangulate: true,
-        ignore_points: true,
-        ignore_lines: true,
-    };
+    let options = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     let mut reader = Cursor::new(&b"mtllib mres-usemtl-names\n"[..]).chain(Cursor::new(&bytes));
-    let (models, _) = tobj::load_obj_buf(&mut reader, &options, load_materials)
-        .map_err(|e| ImportErrorKind::Parse(e.to_string()))?;
+    let (models, _) =
+        tobj::load_obj_buf(&mut reader, &options, load_materials).map_err(|e| ImportErrorKind::Parse(e.to_string()))?;
 
     convert(&models, scan.material_names.len(), scan.triangles, limits)
 }
@@ -95,12 +81,7 @@ fn convert(
     check_vertex_count(vertices as u64, limits)?;
     // A model with vertices but without one normal (UV) per vertex means some face vertex
     // had no `vn` (`vt`): drop that attribute for the whole mesh.
-    let with_vertices = || {
-        models
-            .iter()
-            .map(|m| &m.mesh)
-            .filter(|m| !m.positions.is_empty())
-    };
+    let with_vertices = || models.iter().map(|m| &m.mesh).filter(|m| !m.positions.is_empty());
     let has_normals = with_vertices().all(|m| m.normals.len() == m.positions.len());
     let has_uvs = with_vertices().all(|m| m.texcoords.len() / 2 == m.positions.len() / 3);
 
@@ -144,9 +125,8 @@ fn convert(
 
 /// The file as text; OBJ files are ASCII in practice, and `tobj` needs UTF-8.
 fn text(bytes: &[u8]) -> KindResult<&str> {
-    std::str::from_utf8(bytes).map_err(|e| {
-        ImportErrorKind::Parse(format!("not UTF-8 text (at byte {})", e.valid_up_to()))
-    })
+    std::str::from_utf8(bytes)
+        .map_err(|e| ImportErrorKind::Parse(format!("not UTF-8 text (at byte {})", e.valid_up_to())))
 }
 
 /// Lines of `text` as `tobj` sees them (split at `\n`), with their 1-based numbers and byte
@@ -247,9 +227,7 @@ fn check_finite_vertex(words: std::str::SplitWhitespace<'_>, line_no: usize) -> 
     let coordinates: Vec<f32> = words.take(3).filter_map(|w| w.parse().ok()).collect();
     // Unparsable coordinates are left to tobj, which reports them.
     if coordinates.iter().any(|c| !c.is_finite()) {
-        return Err(ImportErrorKind::NonFinitePosition(format!(
-            "line {line_no}: v {coordinates:?}"
-        )));
+        return Err(ImportErrorKind::NonFinitePosition(format!("line {line_no}: v {coordinates:?}")));
     }
     Ok(())
 }
@@ -259,11 +237,7 @@ fn parse_error(line_no: usize, message: &str) -> ImportErrorKind {
 }
 
 fn out_of_range(line_no: usize, slot: usize, index: i64, count: u64) -> ImportErrorKind {
-    ImportErrorKind::IndexOutOfRange {
-        what: format!("line {line_no}: {}", SLOTS[slot]),
-        index,
-        count,
-    }
+    ImportErrorKind::IndexOutOfRange { what: format!("line {line_no}: {}", SLOTS[slot]), index, count }
 }
 
 /// The `mtllib` files of an OBJ that exist inside its directory, in order of first mention.
@@ -290,9 +264,7 @@ pub(super) fn referenced_files(path: &Path, bytes: &[u8]) -> KindResult<Vec<Path
         if let Some(file) = existing(rest) {
             add(file);
         } else {
-            rest.split_whitespace()
-                .filter_map(existing)
-                .for_each(&mut add);
+            rest.split_whitespace().filter_map(existing).for_each(&mut add);
         }
     }
     Ok(files)
@@ -336,10 +308,7 @@ mod tests {
         ] {
             let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n{face}\n");
             let err = import_str(&text).unwrap_err();
-            assert!(
-                matches!(err, ImportErrorKind::IndexOutOfRange { .. }),
-                "{face}: {err}"
-            );
+            assert!(matches!(err, ImportErrorKind::IndexOutOfRange { .. }), "{face}: {err}");
         }
     }
 

@@ -13,11 +13,7 @@ impl BitWriter {
         if bits == 0 {
             return;
         }
-        let value = if bits == 32 {
-            value
-        } else {
-            value & ((1u32 << bits) - 1)
-        } as u64;
+        let value = if bits == 32 { value } else { value & ((1u32 << bits) - 1) } as u64;
         let word = (self.bit / 32) as usize;
         let shift = self.bit % 32;
         let needed = ((self.bit + bits as u64).div_ceil(32)) as usize;
@@ -51,11 +47,7 @@ pub fn read_bits(words: &[u8], bit_offset: u64, bits: u32) -> Option<u32> {
     if shift + bits as u64 > 32 {
         wide |= load(word + 1)? << 32;
     }
-    let mask = if bits == 32 {
-        u32::MAX as u64
-    } else {
-        (1u64 << bits) - 1
-    };
+    let mask = if bits == 32 { u32::MAX as u64 } else { (1u64 << bits) - 1 };
     Some(((wide >> shift) & mask) as u32)
 }
 
@@ -76,11 +68,7 @@ fn sign(v: f32) -> f32 {
 /// A zero or non-finite normal encodes as +Z.
 pub fn oct_encode(n: [f32; 3], bits: u32) -> [u32; 2] {
     let l1 = n[0].abs() + n[1].abs() + n[2].abs();
-    let (mut x, mut y) = if l1 > 0.0 && l1.is_finite() {
-        (n[0] / l1, n[1] / l1)
-    } else {
-        (0.0, 0.0)
-    };
+    let (mut x, mut y) = if l1 > 0.0 && l1.is_finite() { (n[0] / l1, n[1] / l1) } else { (0.0, 0.0) };
     if l1 > 0.0 && n[2] < 0.0 {
         let (ox, oy) = (x, y);
         x = (1.0 - oy.abs()) * sign(ox);
@@ -116,11 +104,8 @@ mod tests {
         let mut expected = Vec::new();
         for bits in 0..=32u32 {
             for i in 0..5u32 {
-                let v = if bits == 32 {
-                    u32::MAX - i
-                } else {
-                    i.wrapping_mul(2654435761) & ((1u64 << bits) - 1) as u32
-                };
+                let v =
+                    if bits == 32 { u32::MAX - i } else { i.wrapping_mul(2654435761) & ((1u64 << bits) - 1) as u32 };
                 w.push(v, bits);
                 expected.push((v, bits));
             }
@@ -138,11 +123,7 @@ mod tests {
     fn octahedral_error_is_small() {
         for i in 0..2000 {
             let t = i as f32 * 0.37;
-            let n = [
-                t.sin() * (t * 0.7).cos(),
-                (t * 1.3).cos(),
-                (t * 0.3).sin() - 0.2,
-            ];
+            let n = [t.sin() * (t * 0.7).cos(), (t * 1.3).cos(), (t * 0.3).sin() - 0.2];
             let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
             let n = [n[0] / len, n[1] / len, n[2] / len];
             let d = oct_decode(oct_encode(n, 12), 12);

@@ -93,9 +93,7 @@ impl UvQuant {
     pub fn quantize(&self, uv: [f32; 2]) -> [u16; 2] {
         let q = |k: usize| {
             if self.extent[k] > 0.0 {
-                ((uv[k] - self.min[k]) / self.extent[k] * 65535.0)
-                    .round()
-                    .clamp(0.0, 65535.0) as u16
+                ((uv[k] - self.min[k]) / self.extent[k] * 65535.0).round().clamp(0.0, 65535.0) as u16
             } else {
                 0
             }

@@ -110,12 +110,7 @@ impl<'a> Cursor<'a> {
 fn section<'a>(bytes: &'a [u8], start: u64, len: u64, what: &str) -> Result<&'a [u8], MresError> {
     let end = start.checked_add(len).unwrap_or(u64::MAX);
     if end > bytes.len() as u64 {
-        return Err(MresError::Truncated {
-            what: what.into(),
-            start,
-            end,
-            len: bytes.len() as u64,
-        });
+        return Err(MresError::Truncated { what: what.into(), start, end, len: bytes.len() as u64 });
     }
     Ok(&bytes[start as usize..end as usize])
 }
@@ -145,9 +140,7 @@ impl MresFile {
         }
         let header_size = c.u32();
         if header_size as usize != HEADER_SIZE {
-            return Err(corrupt(format!(
-                "header: size {header_size}, expected {HEADER_SIZE}"
-            )));
+            return Err(corrupt(format!("header: size {header_size}, expected {HEADER_SIZE}")));
         }
         let flags = c.u32();
         let origin = c.f32s::<3>();
@@ -165,68 +158,45 @@ impl MresFile {
         let hierarchy_size = c.u64();
         let page_table_offset = c.u64();
         let page_table_size = c.u64();
-        let stored_checksum: [u8; 32] = head[112..144]
-            .try_into()
-            .map_err(|_| corrupt("header".into()))?;
+        let stored_checksum: [u8; 32] = head[112..144].try_into().map_err(|_| corrupt("header".into()))?;
 
         if flags & !(FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS) != 0 {
             return Err(corrupt(format!("header: unknown flags {flags:#x}")));
         }
-        if !(step.is_finite() && step > 0.0)
-            || !origin
-                .iter()
-                .chain(&uv_min)
-                .chain(&uv_extent)
-                .all(|v| v.is_finite())
-        {
-            return Err(corrupt(
-                "header: non-finite or non-positive quantization parameters".into(),
-            ));
+        if !(step.is_finite() && step > 0.0) || !origin.iter().chain(&uv_min).chain(&uv_extent).all(|v| v.is_finite()) {
+            return Err(corrupt("header: non-finite or non-positive quantization parameters".into()));
         }
         if flags & FLAG_NORMALS != 0 && !(4..=16).contains(&normal_bits) {
-            return Err(corrupt(format!(
-                "header: normal_bits {normal_bits} outside 4..=16"
-            )));
+            return Err(corrupt(format!("header: normal_bits {normal_bits} outside 4..=16")));
         }
-        let expected_hierarchy = group_count as u64 * GROUP_RECORD_SIZE as u64
-            + cluster_count as u64 * CLUSTER_RECORD_SIZE as u64;
+        let expected_hierarchy =
+            group_count as u64 * GROUP_RECORD_SIZE as u64 + cluster_count as u64 * CLUSTER_RECORD_SIZE as u64;
         if hierarchy_offset != HEADER_SIZE as u64 || hierarchy_size != expected_hierarchy {
             return Err(corrupt(format!(
                 "header: hierarchy at {hierarchy_offset} size {hierarchy_size}, expected {HEADER_SIZE} and {expected_hierarchy}"
             )));
         }
         if page_table_offset != hierarchy_offset + hierarchy_size {
-            return Err(corrupt(
-                "header: page table does not follow the hierarchy".into(),
-            ));
+            return Err(corrupt("header: page table does not follow the hierarchy".into()));
         }
         let min_table = page_count as u64 * PAGE_RECORD_SIZE as u64;
         if page_table_size < min_table || (page_table_size - min_table) % 4 != 0 {
-            return Err(corrupt(format!(
-                "header: page table size {page_table_size} for {page_count} pages"
-            )));
+            return Err(corrupt(format!("header: page table size {page_table_size} for {page_count} pages")));
         }
         let hierarchy = section(&bytes, hierarchy_offset, hierarchy_size, "hierarchy")?;
         let table = section(&bytes, page_table_offset, page_table_size, "page table")?;
         if meta_checksum(head, hierarchy, table) != stored_checksum {
-            return Err(MresError::Checksum(
-                "header, hierarchy or page table".into(),
-            ));
+            return Err(MresError::Checksum("header, hierarchy or page table".into()));
         }
         let pages_start = page_table_offset + page_table_size;
 
-        let mut c = Cursor {
-            bytes: hierarchy,
-            at: 0,
-        };
+        let mut c = Cursor { bytes: hierarchy, at: 0 };
         let mut groups = Vec::with_capacity(group_count as usize);
         for g in 0..group_count {
             let center = c.f32s::<3>();
             let [radius, error] = c.f32s::<2>();
-            let (level, first_cluster, count, page, _reserved) =
-                (c.u32(), c.u32(), c.u32(), c.u32(), c.u32());
-            let finite =
-                center.iter().all(|v| v.is_finite()) && radius.is_finite() && radius >= 0.0;
+            let (level, first_cluster, count, page, _reserved) = (c.u32(), c.u32(), c.u32(), c.u32(), c.u32());
+            let finite = center.iter().all(|v| v.is_finite()) && radius.is_finite() && radius >= 0.0;
             if !finite || error.is_nan() || error < 0.0 {
                 return Err(corrupt(format!("group {g}: bad sphere or error")));
             }
@@ -235,9 +205,7 @@ impl MresFile {
                 || page >= page_count
                 || level >= level_count
             {
-                return Err(corrupt(format!(
-                    "group {g}: cluster range, page or level out of range"
-                )));
+                return Err(corrupt(format!("group {g}: cluster range, page or level out of range")));
             }
             groups.push(Group {
                 sphere: Sphere { center, radius },
@@ -257,32 +225,19 @@ impl MresFile {
                 .get(group as usize)
                 .is_some_and(|g| (g.first_cluster..g.first_cluster + g.cluster_count).contains(&i));
             if !in_group || (own_group != NO_GROUP && own_group >= group_count) {
-                return Err(corrupt(format!(
-                    "cluster {i}: group reference out of range"
-                )));
+                return Err(corrupt(format!("cluster {i}: group reference out of range")));
             }
             if vertex_count == 0
                 || vertex_count as usize > MAX_CLUSTER_VERTICES
                 || triangle_count == 0
                 || triangle_count as usize > MAX_CLUSTER_TRIANGLES
             {
-                return Err(corrupt(format!(
-                    "cluster {i}: {vertex_count} vertices, {triangle_count} triangles"
-                )));
+                return Err(corrupt(format!("cluster {i}: {vertex_count} vertices, {triangle_count} triangles")));
             }
-            clusters.push(ClusterInfo {
-                group,
-                own_group,
-                vertex_count,
-                triangle_count,
-                page_offset,
-            });
+            clusters.push(ClusterInfo { group, own_group, vertex_count, triangle_count, page_offset });
         }
 
-        let mut c = Cursor {
-            bytes: table,
-            at: 0,
-        };
+        let mut c = Cursor { bytes: table, at: 0 };
         let dep_count = (page_table_size - min_table) / 4;
         let mut pages = Vec::with_capacity(page_count as usize);
         let mut raw_records = Vec::with_capacity(page_count as usize);
@@ -312,9 +267,7 @@ impl MresFile {
             let clusters_ok = first_cluster as u64 + count as u64 <= cluster_count as u64;
             let groups_ok = first_group as u64 + group_count_here as u64 <= group_count as u64;
             if !clusters_ok || !groups_ok || dep_first as u64 + deps as u64 > dep_count {
-                return Err(corrupt(format!(
-                    "page {p}: cluster, group or dependency range out of range"
-                )));
+                return Err(corrupt(format!("page {p}: cluster, group or dependency range out of range")));
             }
             raw_records.push((dep_first, deps));
             pages.push(PageInfo {
@@ -345,35 +298,22 @@ impl MresFile {
         for (g, group) in groups.iter().enumerate() {
             let page = &pages[group.page as usize];
             let inside = group.first_cluster >= page.first_cluster
-                && group.first_cluster + group.cluster_count
-                    <= page.first_cluster + page.cluster_count;
+                && group.first_cluster + group.cluster_count <= page.first_cluster + page.cluster_count;
             if !inside {
-                return Err(corrupt(format!(
-                    "group {g}: clusters not within page {}",
-                    group.page
-                )));
+                return Err(corrupt(format!("group {g}: clusters not within page {}", group.page)));
             }
         }
 
         let header = Header {
             flags,
             grid: Grid { origin, step },
-            uv: UvQuant {
-                min: uv_min,
-                extent: uv_extent,
-            },
+            uv: UvQuant { min: uv_min, extent: uv_extent },
             normal_bits,
             position_bits,
             level_count,
             source_triangles,
         };
-        Ok(MresFile {
-            header,
-            groups,
-            clusters,
-            pages,
-            bytes,
-        })
+        Ok(MresFile { header, groups, clusters, pages, bytes })
     }
 
     /// Total file size in bytes.
@@ -383,25 +323,13 @@ impl MresFile {
 
     /// Verifies page `p`'s checksum and returns its decompressed bytes (the GPU layout).
     pub fn page(&self, p: u32) -> Result<Vec<u8>, MresError> {
-        let info = self
-            .pages
-            .get(p as usize)
-            .ok_or_else(|| corrupt(format!("page {p} does not exist")))?;
-        let frame = section(
-            &self.bytes,
-            info.offset,
-            info.compressed_size as u64,
-            &format!("page {p}"),
-        )?;
+        let info = self.pages.get(p as usize).ok_or_else(|| corrupt(format!("page {p} does not exist")))?;
+        let frame = section(&self.bytes, info.offset, info.compressed_size as u64, &format!("page {p}"))?;
         if blake3::hash(frame).as_bytes() != &info.checksum {
             return Err(MresError::Checksum(format!("page {p}")));
         }
-        let raw = zstd::bulk::decompress(frame, info.raw_size as usize).map_err(|e| {
-            MresError::Decompress {
-                page: p,
-                problem: e.to_string(),
-            }
-        })?;
+        let raw = zstd::bulk::decompress(frame, info.raw_size as usize)
+            .map_err(|e| MresError::Decompress { page: p, problem: e.to_string() })?;
         if raw.len() != info.raw_size as usize {
             return Err(MresError::Decompress {
                 page: p,
@@ -413,10 +341,8 @@ impl MresFile {
 
     /// Decodes cluster `index` from its page's decompressed bytes.
     pub fn decode_cluster(&self, page_raw: &[u8], index: u32) -> Result<DecodedCluster, MresError> {
-        let info = self
-            .clusters
-            .get(index as usize)
-            .ok_or_else(|| corrupt(format!("cluster {index} does not exist")))?;
+        let info =
+            self.clusters.get(index as usize).ok_or_else(|| corrupt(format!("cluster {index} does not exist")))?;
         decode_cluster(&self.header, page_raw, info, index)
     }
 
@@ -430,33 +356,18 @@ impl MresFile {
             }
         }
         if out.len() != self.clusters.len() {
-            return Err(corrupt(format!(
-                "pages hold {} clusters, hierarchy has {}",
-                out.len(),
-                self.clusters.len()
-            )));
+            return Err(corrupt(format!("pages hold {} clusters, hierarchy has {}", out.len(), self.clusters.len())));
         }
         Ok(out)
     }
 }
 
-fn decode_cluster(
-    h: &Header,
-    raw: &[u8],
-    info: &ClusterInfo,
-    index: u32,
-) -> Result<DecodedCluster, MresError> {
+fn decode_cluster(h: &Header, raw: &[u8], info: &ClusterInfo, index: u32) -> Result<DecodedCluster, MresError> {
     let bad = |what: &str| corrupt(format!("cluster {index}: {what}"));
-    let head = section(
-        raw,
-        info.page_offset as u64,
-        CLUSTER_HEADER_SIZE as u64,
-        &format!("cluster {index} header"),
-    )?;
+    let head = section(raw, info.page_offset as u64, CLUSTER_HEADER_SIZE as u64, &format!("cluster {index} header"))?;
     let mut c = Cursor { bytes: head, at: 0 };
     let (vertex_count, triangle_count) = (c.u16() as usize, c.u16() as usize);
-    if vertex_count != info.vertex_count as usize || triangle_count != info.triangle_count as usize
-    {
+    if vertex_count != info.vertex_count as usize || triangle_count != info.triangle_count as usize {
         return Err(bad("counts differ from the hierarchy"));
     }
     let lo = [c.u32() as i32, c.u32() as i32, c.u32() as i32];
@@ -470,19 +381,10 @@ fn decode_cluster(
         if offsets[slot] == 0 {
             return Err(bad(&format!("{what} missing")));
         }
-        section(
-            raw,
-            offsets[slot] as u64,
-            len,
-            &format!("cluster {index} {what}"),
-        )
+        section(raw, offsets[slot] as u64, len, &format!("cluster {index} {what}"))
     };
     let stride: u64 = bits.iter().map(|&b| b as u64).sum();
-    let pos_bytes = block(
-        0,
-        (vertex_count as u64 * stride).div_ceil(32) * 4,
-        "positions",
-    )?;
+    let pos_bytes = block(0, (vertex_count as u64 * stride).div_ceil(32) * 4, "positions")?;
     let mut positions = Vec::with_capacity(vertex_count);
     for v in 0..vertex_count as u64 {
         let mut p = [0i32; 3];
@@ -496,24 +398,16 @@ fn decode_cluster(
     }
     let mut normals = Vec::new();
     if h.flags & FLAG_NORMALS != 0 {
-        let nlo = [
-            u16::from_le_bytes([head[40], head[41]]) as u32,
-            u16::from_le_bytes([head[42], head[43]]) as u32,
-        ];
+        let nlo = [u16::from_le_bytes([head[40], head[41]]) as u32, u16::from_le_bytes([head[42], head[43]]) as u32];
         let nbits = [head[44] as u32, head[45] as u32];
         if nbits.iter().any(|&b| b > h.normal_bits) {
             return Err(bad("normal bit width over the header's normal_bits"));
         }
         let stride = (nbits[0] + nbits[1]) as u64;
-        let bytes = block(
-            1,
-            (vertex_count as u64 * stride).div_ceil(32) * 4,
-            "normals",
-        )?;
+        let bytes = block(1, (vertex_count as u64 * stride).div_ceil(32) * 4, "normals")?;
         for v in 0..vertex_count as u64 {
             let x = read_bits(bytes, v * stride, nbits[0]).ok_or_else(|| bad("normals"))?;
-            let y = read_bits(bytes, v * stride + nbits[0] as u64, nbits[1])
-                .ok_or_else(|| bad("normals"))?;
+            let y = read_bits(bytes, v * stride + nbits[0] as u64, nbits[1]).ok_or_else(|| bad("normals"))?;
             normals.push(oct_decode([nlo[0] + x, nlo[1] + y], h.normal_bits));
         }
     }
@@ -521,10 +415,7 @@ fn decode_cluster(
     if h.flags & FLAG_UVS != 0 {
         let bytes = block(2, vertex_count as u64 * 4, "uvs")?;
         for q in bytes.chunks_exact(4) {
-            uvs.push(h.uv.decode([
-                u16::from_le_bytes([q[0], q[1]]),
-                u16::from_le_bytes([q[2], q[3]]),
-            ]));
+            uvs.push(h.uv.decode([u16::from_le_bytes([q[0], q[1]]), u16::from_le_bytes([q[2], q[3]])]));
         }
     }
     let indices = block(3, triangle_count as u64 * 3, "indices")?.to_vec();
@@ -534,16 +425,7 @@ fn decode_cluster(
     let mut materials = Vec::new();
     if h.flags & FLAG_MATERIALS != 0 {
         let bytes = block(4, triangle_count as u64 * 2, "materials")?;
-        materials = bytes
-            .chunks_exact(2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
-            .collect();
+        materials = bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
     }
-    Ok(DecodedCluster {
-        positions,
-        normals,
-        uvs,
-        indices,
-        materials,
-    })
+    Ok(DecodedCluster { positions, normals, uvs, indices, materials })
 }

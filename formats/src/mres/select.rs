@@ -35,42 +35,21 @@ pub fn projected_error(view: &ViewParams, sphere: &Sphere, error: f32) -> f32 {
 
 /// The (own, parent) errors of a cluster under `metric`.
 fn cluster_errors(groups: &[Group], c: &ClusterInfo, metric: impl Fn(&Group) -> f32) -> (f32, f32) {
-    let own = if c.own_group == NO_GROUP {
-        0.0
-    } else {
-        metric(&groups[c.own_group as usize])
-    };
+    let own = if c.own_group == NO_GROUP { 0.0 } else { metric(&groups[c.own_group as usize]) };
     (own, metric(&groups[c.group as usize]))
 }
 
 /// Clusters of the uniform cut at object-space error `threshold`: own ≤ threshold < parent.
 pub fn uniform_cut(groups: &[Group], clusters: &[ClusterInfo], threshold: f32) -> Vec<u32> {
-    select(
-        clusters,
-        |c| cluster_errors(groups, c, |g| g.error),
-        threshold,
-    )
+    select(clusters, |c| cluster_errors(groups, c, |g| g.error), threshold)
 }
 
 /// Clusters of the view-dependent cut for `view` at `tau` pixels.
-pub fn view_cut(
-    groups: &[Group],
-    clusters: &[ClusterInfo],
-    view: &ViewParams,
-    tau: f32,
-) -> Vec<u32> {
-    select(
-        clusters,
-        |c| cluster_errors(groups, c, |g| projected_error(view, &g.sphere, g.error)),
-        tau,
-    )
+pub fn view_cut(groups: &[Group], clusters: &[ClusterInfo], view: &ViewParams, tau: f32) -> Vec<u32> {
+    select(clusters, |c| cluster_errors(groups, c, |g| projected_error(view, &g.sphere, g.error)), tau)
 }
 
-fn select(
-    clusters: &[ClusterInfo],
-    errors: impl Fn(&ClusterInfo) -> (f32, f32),
-    tau: f32,
-) -> Vec<u32> {
+fn select(clusters: &[ClusterInfo], errors: impl Fn(&ClusterInfo) -> (f32, f32), tau: f32) -> Vec<u32> {
     clusters
         .iter()
         .enumerate()

@@ -47,22 +47,13 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
     for (new_g, &old_g) in layout.group_order.iter().enumerate() {
         let g = &dag.groups[old_g];
         let (first, count) = layout.group_ranges[new_g];
-        groups.push(Group {
-            first_cluster: first,
-            cluster_count: count,
-            page: layout.group_page(&pages, new_g),
-            ..*g
-        });
+        groups.push(Group { first_cluster: first, cluster_count: count, page: layout.group_page(&pages, new_g), ..*g });
     }
     for (new_c, &old_c) in layout.cluster_order.iter().enumerate() {
         let c = &dag.clusters[old_c];
         clusters.push(ClusterInfo {
             group: layout.group_new[c.group as usize],
-            own_group: if c.own_group == NO_GROUP {
-                NO_GROUP
-            } else {
-                layout.group_new[c.own_group as usize]
-            },
+            own_group: if c.own_group == NO_GROUP { NO_GROUP } else { layout.group_new[c.own_group as usize] },
             vertex_count: c.positions.len() as u16,
             triangle_count: (c.indices.len() / 3) as u16,
             page_offset: page_offsets[new_c],
@@ -70,10 +61,7 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
     }
     let dependencies = page_dependencies(&pages, &groups, &clusters);
 
-    let frames: Vec<Vec<u8>> = pages
-        .par_iter()
-        .map(|p| compress_page(p, level))
-        .collect::<Result<_, _>>()?;
+    let frames: Vec<Vec<u8>> = pages.par_iter().map(|p| compress_page(p, level)).collect::<Result<_, _>>()?;
 
     let mut hierarchy = Vec::new();
     for g in &groups {
@@ -103,14 +91,9 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
         table.extend_from_slice(&(frame.len() as u32).to_le_bytes());
         table.extend_from_slice(&(page.raw.len() as u32).to_le_bytes());
         table.extend_from_slice(blake3::hash(frame).as_bytes());
-        for v in [
-            page.first_cluster,
-            page.cluster_count,
-            page.first_group,
-            page.group_count,
-            dep_first,
-            deps.len() as u32,
-        ] {
+        for v in
+            [page.first_cluster, page.cluster_count, page.first_group, page.group_count, dep_first, deps.len() as u32]
+        {
             table.extend_from_slice(&v.to_le_bytes());
         }
         dep_first += deps.len() as u32;
@@ -131,23 +114,12 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
     put_f32s(&mut out, &[h.grid.step]);
     put_f32s(&mut out, &h.uv.min);
     put_f32s(&mut out, &h.uv.extent);
-    for v in [
-        h.normal_bits,
-        h.position_bits,
-        level_count,
-        groups.len() as u32,
-        clusters.len() as u32,
-        pages.len() as u32,
-    ] {
+    for v in
+        [h.normal_bits, h.position_bits, level_count, groups.len() as u32, clusters.len() as u32, pages.len() as u32]
+    {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    for v in [
-        h.source_triangles,
-        hierarchy_offset,
-        hierarchy.len() as u64,
-        page_table_offset,
-        page_table_size,
-    ] {
+    for v in [h.source_triangles, hierarchy_offset, hierarchy.len() as u64, page_table_offset, page_table_size] {
         out.extend_from_slice(&v.to_le_bytes());
     }
     debug_assert_eq!(out.len(), 112);
@@ -196,9 +168,7 @@ impl Layout {
         for (i, c) in dag.clusters.iter().enumerate() {
             let g = c.group as usize;
             if g >= n || (c.own_group != NO_GROUP && c.own_group as usize >= n) {
-                return Err(WriteError::BadDag(format!(
-                    "cluster {i} refers to a missing group"
-                )));
+                return Err(WriteError::BadDag(format!("cluster {i} refers to a missing group")));
             }
             members[g].push(i);
         }
@@ -216,12 +186,7 @@ impl Layout {
             group_ranges.push((cluster_order.len() as u32, members[g].len() as u32));
             cluster_order.extend_from_slice(&members[g]);
         }
-        Ok(Layout {
-            group_order,
-            group_new,
-            cluster_order,
-            group_ranges,
-        })
+        Ok(Layout { group_order, group_new, cluster_order, group_ranges })
     }
 
     fn group_page(&self, pages: &[PageBuild], new_g: usize) -> u32 {
@@ -264,9 +229,7 @@ fn pack_pages(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageBuild> {
         let mut size = 0usize;
         while end_group < layout.group_ranges.len() {
             let (first, count) = layout.group_ranges[end_group];
-            let group_size: usize = (first..first + count)
-                .map(|c| encoded[c as usize].size())
-                .sum();
+            let group_size: usize = (first..first + count).map(|c| encoded[c as usize].size()).sum();
             if end_group > start_group && size + group_size > PAGE_TARGET_RAW_SIZE {
                 break;
             }
@@ -290,12 +253,7 @@ fn pack_pages(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageBuild> {
 /// Lays out a page: all cluster headers first, then the data blocks grouped by kind (every
 /// cluster's positions, then every cluster's normals, UVs, indices, materials), so that zstd
 /// sees like data together. Header offsets are rebased from cluster-relative to page-relative.
-fn assemble_page(
-    clusters: &[EncodedCluster],
-    first_cluster: u32,
-    first_group: u32,
-    group_count: u32,
-) -> PageBuild {
+fn assemble_page(clusters: &[EncodedCluster], first_cluster: u32, first_group: u32, group_count: u32) -> PageBuild {
     let mut raw = vec![0u8; clusters.len() * CLUSTER_HEADER_SIZE];
     let mut headers: Vec<[u8; CLUSTER_HEADER_SIZE]> = clusters.iter().map(|c| c.header).collect();
     let mut sections = vec![0, raw.len()];
@@ -338,37 +296,20 @@ struct EncodedCluster {
 
 impl EncodedCluster {
     fn size(&self) -> usize {
-        CLUSTER_HEADER_SIZE
-            + self
-                .blocks
-                .iter()
-                .flatten()
-                .map(|b| b.len().next_multiple_of(4))
-                .sum::<usize>()
+        CLUSTER_HEADER_SIZE + self.blocks.iter().flatten().map(|b| b.len().next_multiple_of(4)).sum::<usize>()
     }
 }
 
 /// Encodes one cluster: its header (block offsets filled in by [`assemble_page`]) and blocks.
-fn encode_cluster(
-    c: &DagCluster,
-    h: &Header,
-    flags: u32,
-    index: usize,
-) -> Result<EncodedCluster, WriteError> {
-    let bad = |problem: String| WriteError::BadCluster {
-        cluster: index,
-        problem,
-    };
+fn encode_cluster(c: &DagCluster, h: &Header, flags: u32, index: usize) -> Result<EncodedCluster, WriteError> {
+    let bad = |problem: String| WriteError::BadCluster { cluster: index, problem };
     let vertex_count = c.positions.len();
     let triangle_count = c.indices.len() / 3;
     if vertex_count == 0 || vertex_count > MAX_CLUSTER_VERTICES {
         return Err(bad(format!("{vertex_count} vertices (1..=256 allowed)")));
     }
     if triangle_count == 0 || triangle_count > MAX_CLUSTER_TRIANGLES || c.indices.len() % 3 != 0 {
-        return Err(bad(format!(
-            "{} indices (3..=384, multiple of 3)",
-            c.indices.len()
-        )));
+        return Err(bad(format!("{} indices (3..=384, multiple of 3)", c.indices.len())));
     }
     if let Some(i) = c.indices.iter().find(|&&i| i as usize >= vertex_count) {
         return Err(bad(format!("index {i} out of {vertex_count} vertices")));
@@ -378,9 +319,7 @@ fn encode_cluster(
         || !with(FLAG_UVS, c.uvs.len(), vertex_count)
         || !with(FLAG_MATERIALS, c.materials.len(), triangle_count)
     {
-        return Err(bad(
-            "attribute count does not match the vertex/triangle count".into(),
-        ));
+        return Err(bad("attribute count does not match the vertex/triangle count".into()));
     }
 
     let mut header = [0u8; CLUSTER_HEADER_SIZE];
@@ -395,11 +334,7 @@ fn encode_cluster(
     }
     blocks[0] = Some(packed);
     if flags & FLAG_NORMALS != 0 {
-        let (lo, bits, packed) = pack_ranges(
-            c.normals
-                .iter()
-                .map(|n| oct_encode(*n, h.normal_bits).map(|v| v as i64)),
-        );
+        let (lo, bits, packed) = pack_ranges(c.normals.iter().map(|n| oct_encode(*n, h.normal_bits).map(|v| v as i64)));
         header[40..42].copy_from_slice(&(lo[0] as u16).to_le_bytes());
         header[42..44].copy_from_slice(&(lo[1] as u16).to_le_bytes());
         header[44] = bits[0] as u8;
@@ -407,13 +342,7 @@ fn encode_cluster(
         blocks[1] = Some(packed);
     }
     if flags & FLAG_UVS != 0 {
-        blocks[2] = Some(
-            c.uvs
-                .iter()
-                .flat_map(|uv| h.uv.quantize(*uv))
-                .flat_map(u16::to_le_bytes)
-                .collect(),
-        );
+        blocks[2] = Some(c.uvs.iter().flat_map(|uv| h.uv.quantize(*uv)).flat_map(u16::to_le_bytes).collect());
     }
     blocks[3] = Some(c.indices.clone());
     if flags & FLAG_MATERIALS != 0 {
@@ -424,9 +353,7 @@ fn encode_cluster(
 
 /// Packs N-component integer vectors as offsets from their per-component minimum, each
 /// component with the fewest bits that hold its range. Returns (minimum, bits, packed bytes).
-fn pack_ranges<const N: usize>(
-    values: impl Iterator<Item = [i64; N]> + Clone,
-) -> ([i64; N], [u32; N], Vec<u8>) {
+fn pack_ranges<const N: usize>(values: impl Iterator<Item = [i64; N]> + Clone) -> ([i64; N], [u32; N], Vec<u8>) {
     let mut lo = [i64::MAX; N];
     let mut hi = [i64::MIN; N];
     for v in values.clone() {
@@ -451,11 +378,7 @@ fn words_to_bytes(words: &[u32]) -> Vec<u8> {
 
 /// Per page, the other pages it depends on: those holding its clusters' parents (the clusters
 /// produced by its groups) and those holding their siblings (produced by the same group).
-fn page_dependencies(
-    pages: &[PageBuild],
-    groups: &[Group],
-    clusters: &[ClusterInfo],
-) -> Vec<Vec<u32>> {
+fn page_dependencies(pages: &[PageBuild], groups: &[Group], clusters: &[ClusterInfo]) -> Vec<Vec<u32>> {
     // Pages holding the output of each group.
     let mut output_pages: Vec<Vec<u32>> = vec![Vec::new(); groups.len()];
     for c in clusters {
