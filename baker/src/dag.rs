@@ -90,7 +90,7 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
             .par_iter()
             .map(|part| {
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
-                let s = simplify_group(mesh, &merged, locked, settings)?;
+                let s = simplify_group(mesh, &merged, locked, &special, settings)?;
                 Some((split(&s.indices, &mesh.positions, settings), s.error, s.method))
             })
             .collect();
@@ -190,9 +190,9 @@ fn open_and_nonmanifold(mesh: &WeldedMesh) -> (Vec<bool>, Vec<(u64, u32)>) {
     (locked, special)
 }
 
-/// Each group's output is checked on its own (border kept, interior manifold), but two groups
-/// can each add the same chord between two border vertices they share, which together makes
-/// an edge used four times. Find such edges in the level's result and put the groups that
+/// Each group's output is checked on its own (border kept, no hole inside), but two groups
+/// can each add the same chord between two border vertices they share, which together can
+/// break an original open edge's count. Find such edges in the level's result and put the groups that
 /// produced them back as stuck (their members wait for the next level), until none remain.
 fn revert_conflicts(
     mesh: &WeldedMesh,
@@ -221,8 +221,9 @@ fn revert_conflicts(
         edges.par_sort_unstable();
         let mut conflicting: Vec<u32> = Vec::new();
         for run in edges.chunk_by(|a, b| a.0 == b.0) {
-            let expected = special.binary_search_by_key(&run[0].0, |e| e.0).map_or(2, |i| special[i].1);
-            if run.len() as u32 != expected {
+            let count = run.len() as u32;
+            let ok = special.binary_search_by_key(&run[0].0, |e| e.0).map_or(count % 2 == 0, |i| special[i].1 == count);
+            if !ok {
                 conflicting.extend(run.iter().map(|e| e.1).filter(|&g| g != u32::MAX));
             }
         }

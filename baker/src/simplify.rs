@@ -38,12 +38,13 @@ const SLOPPY_ERROR_FACTOR: f32 = 2.0;
 const REPAIR_ATTEMPTS: usize = 4;
 
 /// Simplifies the triangle list `indices` (welded vertex ids) with every vertex for which
-/// `locked` is true kept in place. `None` when no simplifier gets below the stuck ratio with
+/// `locked` is true kept in place; `special` lists the original's open and non-manifold edges. `None` when no simplifier gets below the stuck ratio with
 /// the group's border intact and its interior manifold.
 pub fn simplify_group(
     mesh: &WeldedMesh,
     indices: &[u32],
     locked: impl Fn(u32) -> bool,
+    special: &[(u64, u32)],
     settings: &BakeSettings,
 ) -> Option<Simplified> {
     // Compact the group's vertices so that each group works on a small, local vertex array.
@@ -65,7 +66,7 @@ pub fn simplify_group(
         attributes: &attributes,
         weights: &weights,
         limit: (triangles as f32 * settings.stuck_ratio) as usize,
-        border: EdgeCounts::border(mesh, indices),
+        border: EdgeCounts::border(mesh, indices, special),
     };
     for method in [Method::Regular, Method::Permissive, Method::Prune, Method::Sloppy] {
         if method == Method::Permissive && weights.is_empty() {
@@ -129,9 +130,7 @@ impl Group<'_> {
     fn run(&self, method: Method, locks: &[bool], target: usize) -> Option<(Vec<u32>, f32)> {
         let (local, adapter) = (self.local, self.adapter);
         let stride = self.weights.len() * 4;
-        // Prune lets whole unlocked components (a far-away box, a leaf) vanish when their error
-        // allows, so that meshes of many disconnected parts still reach one root.
-        let base = SimplifyOptions::LockBorder | SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune;
+        let base = SimplifyOptions::LockBorder | SimplifyOptions::ErrorAbsolute;
         let mut error = 0.0f32;
         let result = match method {
             Method::Regular | Method::Permissive => {
@@ -174,10 +173,13 @@ impl Group<'_> {
 }
 
 /// Edge use counts by position, to check that a simplified group keeps its border exactly
-/// and is manifold inside: the local form of the crack-freedom invariant.
+/// and has no hole inside: the local form of the crack-freedom invariant.
 struct EdgeCounts {
     /// Sorted (edge, uses) of the input's edges not used exactly twice.
     border: Vec<(u64, u32)>,
+    /// The original's open and non-manifold edges, sorted: an output must not create one
+    /// (another group may already use it, and together they would break its count).
+    special: Vec<u64>,
 }
 
 fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
@@ -196,14 +198,24 @@ fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
 }
 
 impl EdgeCounts {
-    fn border(mesh: &WeldedMesh, indices: &[u32]) -> EdgeCounts {
+    /// Odd counts mark the group's border (shared with the rest of the mesh, or the original's
+    /// open edges); the original's open and non-manifold edges (`special`, sorted) are kept too.
+    /// Other edges are interior and free to change.
+    fn border(mesh: &WeldedMesh, indices: &[u32], special: &[(u64, u32)]) -> EdgeCounts {
         let keys = edge_keys(mesh, indices);
-        let border = keys.chunk_by(|a, b| a == b).filter(|r| r.len() != 2).map(|r| (r[0], r.len() as u32)).collect();
-        EdgeCounts { border }
+        let is_special = |k: u64| special.binary_search_by_key(&k, |e| e.0).is_ok();
+        let border = keys
+            .chunk_by(|a, b| a == b)
+            .filter(|r| r.len() % 2 == 1 || is_special(r[0]))
+            .map(|r| (r[0], r.len() as u32))
+            .collect();
+        EdgeCounts { border, special: special.iter().map(|e| e.0).collect() }
     }
 
-    /// `Ok` if `out` uses every border edge as often as the input and every other edge twice;
-    /// otherwise the offending edges (including border edges it lost).
+    /// `Ok` if `out` uses every border edge as often as the input and every other edge an even
+    /// number of times (twice, or four times where a thin part pinches into one edge); otherwise
+    /// the offending edges (including border edges it lost). An odd count is a hole or a
+    /// T-junction.
     fn check(&self, mesh: &WeldedMesh, out: &[u32]) -> Result<(), Vec<u64>> {
         let keys = edge_keys(mesh, out);
         let mut bad = Vec::new();
@@ -216,7 +228,7 @@ impl EdgeCounts {
                         bad.push(run[0]);
                     }
                 }
-                Err(_) if run.len() != 2 => bad.push(run[0]),
+                Err(_) if run.len() % 2 != 0 || self.special.binary_search(&run[0]).is_ok() => bad.push(run[0]),
                 Err(_) => {}
             }
         }

@@ -2,11 +2,14 @@
 //! errors, nested spheres) and 5 (format integrity), plus the DAG's shape figures.
 //!
 //! Crack check: the original surface is the union of the level-0 clusters. Edges are welded by
-//! grid position. A cut is crack-free iff every edge the cut uses is used exactly twice, except
-//! the original's open or non-manifold edges, which must appear exactly as often as in the
-//! original. This catches holes and T-junctions (an edge used once) and overlaps (an edge used
-//! more than twice). Each cluster's edges are precomputed as (edge id, multiplicity) so that a
-//! cut costs one counter increment per distinct cluster edge.
+//! grid position. A cut is crack-free iff the original's open and non-manifold edges appear in
+//! it exactly as often as in the original, and every other edge it uses is used an even number
+//! of times: twice, or four times where simplification pinched a thin part into one edge (not a
+//! crack; counted and reported). A hole or T-junction shows as an odd count along its rim. A
+//! cluster drawn together with one of its parents (overlap) is caught directly: no selected
+//! cluster may be a member of the group that produced another selected cluster. Each cluster's
+//! edges are precomputed as (edge id, multiplicity) so that a cut costs one counter increment
+//! per distinct cluster edge.
 
 use formats::mres::{select, MresError, MresFile, Sphere, NO_GROUP};
 use rayon::prelude::*;
@@ -70,6 +73,8 @@ pub struct Report {
     pub random_cuts: u64,
     /// Cuts with a crack or overlap.
     pub cracked_cuts: u64,
+    /// Most edges used four or more times (pinches) in one cut.
+    pub max_pinched_edges: u64,
     /// Child→parent relations checked for monotone error and nested spheres.
     pub relations_checked: u64,
     /// Total violations found.
@@ -97,7 +102,7 @@ struct Edges {
     /// Per cluster: (edge id, uses within the cluster).
     per_cluster: Vec<Vec<(u32, u8)>>,
     /// Expected uses of each edge in a crack-free cut: the original's count for open and
-    /// non-manifold original edges, 2 otherwise.
+    /// non-manifold original edges, 0 (meaning "any even count") otherwise.
     expected: Vec<u8>,
     /// Original edges whose count is not 2: they must appear in every cut.
     special: Vec<u32>,
@@ -195,18 +200,23 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
     let cameras = random_views(file, options.random_cuts, options.seed);
     report.uniform_cuts = uniform.len() as u64;
     report.random_cuts = cameras.len() as u64;
-    let failures: Vec<(String, Vec<String>)> = uniform
+    let checks: Vec<(String, CutCheck)> = uniform
         .into_par_iter()
-        .map(|(name, cut)| (name, check_cut(&edges, &cut, clusters)))
+        .map(|(name, cut)| (name, check_cut(&edges, &cut, groups, clusters)))
         .chain(cameras.into_par_iter().map(|(view, tau)| {
             let cut = select::view_cut(groups, clusters, &view, tau);
-            (format!("view cut eye {:?} tau {tau} px", view.eye), check_cut(&edges, &cut, clusters))
+            (format!("view cut eye {:?} tau {tau} px", view.eye), check_cut(&edges, &cut, groups, clusters))
         }))
-        .filter(|(_, problems)| !problems.is_empty())
         .collect();
-    for (name, problems) in failures {
-        report.cracked_cuts += 1;
-        report.violation(max, || format!("{name}: {} (crack-free cuts); first: {}", problems.len(), problems[0]));
+    for (name, check) in checks {
+        report.max_pinched_edges = report.max_pinched_edges.max(check.pinched);
+        if !check.problems.is_empty() {
+            report.cracked_cuts += 1;
+            let problems = check.problems;
+            report.violation(max, || {
+                format!("{name}: {} problems (crack-free cuts); first: {}", problems.len(), problems[0])
+            });
+        }
     }
     Ok(report)
 }
@@ -255,7 +265,7 @@ fn edge_tables(file: &MresFile, decoded: &[formats::mres::DecodedCluster]) -> Ed
         .par_iter()
         .map(|keys| keys.chunk_by(|a, b| a == b).map(|run| (id_of(run[0]), run.len().min(255) as u8)).collect())
         .collect();
-    let mut expected = vec![2u8; all.len()];
+    let mut expected = vec![0u8; all.len()];
     let mut original = vec![0u32; all.len()];
     for (c, info) in file.clusters.iter().enumerate() {
         if info.own_group == NO_GROUP {
@@ -275,8 +285,21 @@ fn edge_tables(file: &MresFile, decoded: &[formats::mres::DecodedCluster]) -> Ed
     Edges { per_cluster, expected, special, ends }
 }
 
-/// Checks one cut; returns a description of each bad edge (at most a few).
-fn check_cut(edges: &Edges, cut: &[u32], clusters: &[formats::mres::ClusterInfo]) -> Vec<String> {
+/// What one cut's check found.
+struct CutCheck {
+    /// Descriptions of the first bad edges or overlaps (all counted).
+    problems: Vec<String>,
+    /// Edges used four or more times.
+    pinched: u64,
+}
+
+/// Checks one cut: edge counts (see the module doc) and direct parent/child overlap.
+fn check_cut(
+    edges: &Edges,
+    cut: &[u32],
+    groups: &[formats::mres::Group],
+    clusters: &[formats::mres::ClusterInfo],
+) -> CutCheck {
     let mut count: FxHashMap<u32, u32> = FxHashMap::default();
     for &c in cut {
         for &(e, n) in &edges.per_cluster[c as usize] {
@@ -292,17 +315,23 @@ fn check_cut(edges: &Edges, cut: &[u32], clusters: &[formats::mres::ClusterInfo]
                 .map(|&c| format!("cluster {c} (group {})", clusters[c as usize].group))
                 .collect();
             let (a, b) = edges.ends[e as usize];
-            problems.push(format!(
-                "edge {a:?}-{b:?} used {got}x, expected {}x, in [{}]",
-                edges.expected[e as usize],
-                owners.join(", ")
-            ));
+            let expected = match edges.expected[e as usize] {
+                0 => "an even count".to_string(),
+                n => format!("{n}x"),
+            };
+            problems.push(format!("edge {a:?}-{b:?} used {got}x, expected {expected}, in [{}]", owners.join(", ")));
         } else {
             problems.push(String::new());
         }
     };
-    let mut bad: Vec<(u32, u32)> =
-        count.iter().filter(|(e, n)| **n != edges.expected[**e as usize] as u32).map(|(e, n)| (*e, *n)).collect();
+    let mut bad: Vec<(u32, u32)> = count
+        .iter()
+        .filter(|(e, n)| match edges.expected[**e as usize] {
+            0 => **n % 2 != 0,
+            x => **n != x as u32,
+        })
+        .map(|(e, n)| (*e, *n))
+        .collect();
     bad.sort_unstable();
     for (e, n) in bad {
         describe(e, n);
@@ -312,7 +341,25 @@ fn check_cut(edges: &Edges, cut: &[u32], clusters: &[formats::mres::ClusterInfo]
             describe(e, 0);
         }
     }
-    problems
+    let pinched = count.iter().filter(|(e, n)| edges.expected[**e as usize] == 0 && **n >= 4).count() as u64;
+    // Overlap: a selected cluster together with a member of the group that produced it.
+    let mut selected = vec![false; clusters.len()];
+    for &c in cut {
+        selected[c as usize] = true;
+    }
+    for &c in cut {
+        let own = clusters[c as usize].own_group;
+        if own == NO_GROUP {
+            continue;
+        }
+        let g = &groups[own as usize];
+        if let Some(m) = (g.first_cluster..g.first_cluster + g.cluster_count).find(|&m| selected[m as usize]) {
+            problems.push(format!(
+                "cluster {c} drawn together with its child cluster {m} (member of group {own}): overlap"
+            ));
+        }
+    }
+    CutCheck { problems, pinched }
 }
 
 /// Random cameras around and inside the model's bounds, with random pixel thresholds.

@@ -141,8 +141,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     println!("{:>5} {:>9} {:>8} {:>11}", l.level, l.clusters, l.groups, l.triangles);
                 }
                 println!(
-                    "cuts checked: {} uniform, {} random; cracked {}; relations checked {}",
-                    report.uniform_cuts, report.random_cuts, report.cracked_cuts, report.relations_checked
+                    "cuts checked: {} uniform, {} random; cracked {}; relations checked {}; most pinched edges in a cut {}",
+                    report.uniform_cuts,
+                    report.random_cuts,
+                    report.cracked_cuts,
+                    report.relations_checked,
+                    report.max_pinched_edges
                 );
                 for v in &report.violations {
                     println!("VIOLATION {}: {v}", file.display());

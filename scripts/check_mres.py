@@ -1,0 +1,1374 @@
+#!/usr/bin/env python3
+"""Independent checker for `.mres` files (format version 1).
+
+Written from docs/FORMAT.md alone, as a second implementation next to the Rust
+reader/validator: it reads every section with numpy, verifies checksums,
+references and ranges (spec section 7), decodes every cluster (section 5),
+checks the DAG invariants the selection rule relies on (section 6), checks that
+uniform and view-dependent cuts are crack-free by counting welded edges, cross-
+checks cut topology with trimesh and measures cut-to-level-0 distances.
+
+Usage:
+    check_mres.py FILE.mres [FILE.mres ...] [--source MESH] [--random-cuts N]
+                  [--seed S] [--json] [--distance-samples N]
+
+Exit status: 0 every file passes, 1 some file has a violation, 2 usage or I/O
+error (a file that cannot be opened or read).
+"""
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import math
+import struct
+import sys
+import time
+
+try:
+    import numpy as np
+    import blake3
+    import zstandard
+except ImportError as exc:  # pragma: no cover - environment problem
+    print(f"check_mres: missing dependency ({exc}); "
+          "pip install -r scripts/requirements.txt", file=sys.stderr)
+    sys.exit(2)
+
+# ---------------------------------------------------------------------------
+# Format constants (docs/FORMAT.md)
+# ---------------------------------------------------------------------------
+
+MAGIC = b"MRES"
+VERSION = 1
+HEADER_SIZE = 160
+GROUP_SIZE = 40
+CLUSTER_SIZE = 16
+PAGE_SIZE = 72
+CLUSTER_HEADER_SIZE = 48
+MAX_RAW_SIZE = 16 * 1024 * 1024
+NONE = 0xFFFFFFFF
+
+FLAG_NORMALS = 1
+FLAG_UVS = 2
+FLAG_MATERIALS = 4
+KNOWN_FLAGS = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS
+
+# header bytes 0..112 (the checksum follows at 112, reserved at 144..160)
+HEADER_FMT = "<4sIII3ff2f2fIIIIIIQQQQQ"
+assert struct.calcsize(HEADER_FMT) == 112
+
+GROUP_DT = np.dtype([
+    ("center", "<f4", (3,)), ("radius", "<f4"), ("error", "<f4"),
+    ("level", "<u4"), ("first_cluster", "<u4"), ("cluster_count", "<u4"),
+    ("page", "<u4"), ("reserved", "<u4"),
+])
+CLUSTER_DT = np.dtype([
+    ("group", "<u4"), ("own_group", "<u4"), ("vertex_count", "<u2"),
+    ("triangle_count", "<u2"), ("page_offset", "<u4"),
+])
+PAGE_DT = np.dtype([
+    ("offset", "<u8"), ("compressed_size", "<u4"), ("raw_size", "<u4"),
+    ("checksum", "u1", (32,)), ("first_cluster", "<u4"), ("cluster_count", "<u4"),
+    ("first_group", "<u4"), ("group_count", "<u4"),
+    ("dependency_first", "<u4"), ("dependency_count", "<u4"),
+])
+CHDR_DT = np.dtype([
+    ("vertex_count", "<u2"), ("triangle_count", "<u2"),
+    ("position_min", "<i4", (3,)), ("position_bits", "u1", (3,)), ("reserved0", "u1"),
+    ("positions_offset", "<u4"), ("normals_offset", "<u4"), ("uvs_offset", "<u4"),
+    ("indices_offset", "<u4"), ("materials_offset", "<u4"),
+    ("normal_min", "<u2", (2,)), ("normal_bits", "u1", (2,)), ("reserved1", "<u2"),
+])
+assert GROUP_DT.itemsize == GROUP_SIZE and CLUSTER_DT.itemsize == CLUSTER_SIZE
+assert PAGE_DT.itemsize == PAGE_SIZE and CHDR_DT.itemsize == CLUSTER_HEADER_SIZE
+
+# random view-dependent cuts (spec section 6 formula, parameters from the brief)
+TAUS = (0.25, 0.5, 1.0, 2.0, 4.0, 16.0)
+VIEW_H = 1080.0
+FOV_Y_DEG = 60.0
+
+MAX_EXAMPLES = 5
+
+
+class Fatal(Exception):
+    """A violation after which the rest of the file cannot be interpreted."""
+
+
+class Report:
+    """Violations (the file breaks the spec) and notes (information)."""
+
+    def __init__(self, path):
+        self.path = path
+        self.violations = {}
+        self.notes = {}
+        self.figures = {}
+        self.io_error = None
+
+    @staticmethod
+    def _add(table, kind, count, examples):
+        entry = table.setdefault(kind, {"count": 0, "examples": []})
+        entry["count"] += int(count)
+        room = MAX_EXAMPLES - len(entry["examples"])
+        if room > 0:
+            entry["examples"].extend(examples[:room])
+
+    def violation(self, kind, msg, count=1):
+        self._add(self.violations, kind, count, [msg])
+
+    def note(self, kind, msg, count=1):
+        self._add(self.notes, kind, count, [msg])
+
+    def violations_where(self, kind, mask_or_idx, fmt):
+        """Record one violation per index in mask_or_idx, formatting a few."""
+        idx = np.asarray(mask_or_idx)
+        if idx.dtype == bool:
+            idx = np.flatnonzero(idx)
+        if idx.size:
+            self._add(self.violations, kind, idx.size,
+                      [fmt(int(i)) for i in idx[:MAX_EXAMPLES]])
+        return idx.size
+
+    def notes_where(self, kind, mask_or_idx, fmt):
+        idx = np.asarray(mask_or_idx)
+        if idx.dtype == bool:
+            idx = np.flatnonzero(idx)
+        if idx.size:
+            self._add(self.notes, kind, idx.size,
+                      [fmt(int(i)) for i in idx[:MAX_EXAMPLES]])
+        return idx.size
+
+    def fatal(self, kind, msg):
+        self.violation(kind, msg)
+        raise Fatal(msg)
+
+    @property
+    def violation_count(self):
+        return sum(v["count"] for v in self.violations.values())
+
+    @property
+    def ok(self):
+        return self.io_error is None and not self.violations
+
+
+# ---------------------------------------------------------------------------
+# numpy helpers
+# ---------------------------------------------------------------------------
+
+def seg_arange(counts):
+    """Concatenation of arange(n) for each n in counts."""
+    counts = np.asarray(counts, dtype=np.int64)
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    starts = np.cumsum(counts) - counts
+    return np.arange(total, dtype=np.int64) - np.repeat(starts, counts)
+
+
+def read_bits(words, word0, bitpos, width):
+    """Value of `width` bits at bit `bitpos` of the stream starting at word
+    index `word0` (spec section 5.2: LSB first, may straddle two words)."""
+    w = word0 + (bitpos >> 5)
+    shift = (bitpos & 31).astype(np.uint64)
+    lo = words[w].astype(np.uint64)
+    hi = words[w + 1].astype(np.uint64) << np.uint64(32)
+    mask = (np.uint64(1) << width.astype(np.uint64)) - np.uint64(1)
+    return (((lo | hi) >> shift) & mask).astype(np.int64)
+
+
+def decompress_frames(comp, raw_size):
+    """Decompress one or more concatenated zstd frames, producing at most
+    raw_size + 1 bytes (so an oversized page is detected without inflating
+    it)."""
+    dctx = zstandard.ZstdDecompressor()
+    reader = dctx.stream_reader(io.BytesIO(comp), read_across_frames=True)
+    chunks = []
+    got = 0
+    limit = raw_size + 1
+    while got < limit:
+        chunk = reader.read(min(limit - got, 1 << 20))
+        if not chunk:
+            break
+        chunks.append(chunk)
+        got += len(chunk)
+    return b"".join(chunks)
+
+
+def count_frames(comp):
+    """Number of concatenated zstd frames (informative)."""
+    n = 0
+    rest = comp
+    dctx = zstandard.ZstdDecompressor()
+    while rest:
+        obj = dctx.decompressobj()
+        obj.decompress(rest)
+        n += 1
+        rest = obj.unused_data
+    return n
+
+
+def fmt_f(x):
+    return f"{float(x):.6g}"
+
+
+# ---------------------------------------------------------------------------
+# The checker
+# ---------------------------------------------------------------------------
+
+class Checker:
+    def __init__(self, path, data, opts, report):
+        self.path = path
+        self.data = data
+        self.opts = opts
+        self.r = report
+        self.t0 = time.perf_counter()
+        self.timings = {}
+        self.complete = False  # every cluster decoded without violation
+
+    def _lap(self, name, start):
+        self.timings[name] = round(time.perf_counter() - start, 3)
+
+    # -- locations ---------------------------------------------------------
+    def cl(self, c):
+        """Human-readable location of cluster c."""
+        s = f"cluster {c}"
+        extra = []
+        if self.cluster_refs_ok is not None and c < self.C:
+            g = int(self.cgroup[c])
+            if g < self.G:
+                extra.append(f"group {g}")
+            if self.cpage is not None:
+                extra.append(f"page {int(self.cpage[c])}")
+            elif g < self.G and self.gpage[g] < self.P:
+                extra.append(f"page {int(self.gpage[g])}")
+        return s + (f" ({', '.join(extra)})" if extra else "")
+
+    def gl(self, g):
+        return f"group {g} (level {int(self.glevel[g])}, page {int(self.gpage[g])})"
+
+    # -- section 2 -----------------------------------------------------------
+    def read_header(self):
+        d = self.data
+        n = len(d)
+        r = self.r
+        self.cluster_refs_ok = None
+        self.cpage = None
+        if n < HEADER_SIZE:
+            r.fatal("truncated", f"file is {n} bytes, shorter than the {HEADER_SIZE}-byte header")
+        (magic, version, header_size, flags, ox, oy, oz, step, umin0, umin1, uext0, uext1,
+         normal_bits, position_bits, level_count, G, C, P, source_tris,
+         h_off, h_size, pt_off, pt_size) = struct.unpack_from(HEADER_FMT, d, 0)
+        if magic != MAGIC:
+            r.fatal("bad_magic", f"magic is {magic!r}, expected {MAGIC!r}")
+        if version != VERSION:
+            r.fatal("bad_version", f"version {version}, this checker reads version {VERSION}")
+        if header_size != HEADER_SIZE:
+            r.fatal("bad_header_size", f"header_size {header_size} != {HEADER_SIZE}")
+        if flags & ~KNOWN_FLAGS:
+            r.violation("unknown_flags", f"flags 0x{flags:x} has unknown bits 0x{flags & ~KNOWN_FLAGS:x}")
+        f32 = np.float32
+        self.origin = np.array([ox, oy, oz], dtype=f32)
+        self.step = f32(step)
+        self.uv_min = np.array([umin0, umin1], dtype=f32)
+        self.uv_extent = np.array([uext0, uext1], dtype=f32)
+        if not np.isfinite(self.origin).all():
+            r.violation("bad_quantization", f"grid_origin {self.origin.tolist()} is not finite")
+        if not (math.isfinite(step) and step > 0):
+            r.fatal("bad_quantization", f"grid_step {step} is not finite and > 0")
+        if not np.isfinite(self.uv_min).all():
+            r.violation("bad_quantization", f"uv_min {self.uv_min.tolist()} is not finite")
+        if not (np.isfinite(self.uv_extent).all() and (self.uv_extent >= 0).all()):
+            r.violation("bad_quantization", f"uv_extent {self.uv_extent.tolist()} is not finite and >= 0")
+        if not 4 <= normal_bits <= 16:
+            r.violation("bad_normal_bits", f"header normal_bits {normal_bits} outside 4..=16")
+        self.flags = flags
+        self.normal_bits = normal_bits
+        self.position_bits = position_bits
+        self.level_count = level_count
+        self.G, self.C, self.P = G, C, P
+        self.source_triangles = source_tris
+        if h_off != HEADER_SIZE:
+            r.fatal("section_layout", f"hierarchy_offset {h_off} != {HEADER_SIZE}")
+        if h_size != G * GROUP_SIZE + C * CLUSTER_SIZE:
+            r.fatal("section_layout", f"hierarchy_size {h_size} != G*40 + C*16 = "
+                    f"{G * GROUP_SIZE + C * CLUSTER_SIZE} (G={G}, C={C})")
+        if pt_off != h_off + h_size:
+            r.fatal("section_layout", f"page_table_offset {pt_off} != hierarchy end {h_off + h_size}")
+        if pt_size < P * PAGE_SIZE or (pt_size - P * PAGE_SIZE) % 4:
+            r.fatal("section_layout", f"page_table_size {pt_size} is not P*72 + 4*D (P={P})")
+        self.D = (pt_size - P * PAGE_SIZE) // 4
+        self.pt_off = pt_off
+        self.pt_end = pt_off + pt_size
+        if n < self.pt_end:
+            r.fatal("truncated", f"file is {n} bytes, shorter than the page table end {self.pt_end}")
+        h = blake3.blake3(bytes(d[0:112]))
+        h.update(bytes(d[HEADER_SIZE:self.pt_end]))
+        if h.digest() != bytes(d[112:144]):
+            r.violation("meta_checksum", "meta_checksum does not match BLAKE3(header[0..112] + hierarchy + page table)")
+        if any(d[144:160]):
+            r.violation("reserved_nonzero", "header reserved bytes 144..160 are not zero")
+        if flags & FLAG_NORMALS and not 4 <= normal_bits <= 16:
+            self.normals_decodable = False
+        else:
+            self.normals_decodable = True
+
+    # -- section 3 and 4: parse --------------------------------------------------
+    def read_tables(self):
+        d, G, C, P = self.data, self.G, self.C, self.P
+        g = np.frombuffer(d, GROUP_DT, count=G, offset=HEADER_SIZE)
+        self.gcenter = g["center"].astype(np.float32).reshape(G, 3)
+        self.gradius = g["radius"].astype(np.float32)
+        self.gerror = g["error"].astype(np.float32)
+        self.glevel = g["level"].astype(np.int64)
+        self.gfirst = g["first_cluster"].astype(np.int64)
+        self.gcount = g["cluster_count"].astype(np.int64)
+        self.gpage = g["page"].astype(np.int64)
+        self.greserved = g["reserved"].astype(np.int64)
+        c = np.frombuffer(d, CLUSTER_DT, count=C, offset=HEADER_SIZE + G * GROUP_SIZE)
+        self.cgroup = c["group"].astype(np.int64)
+        self.cown = c["own_group"].astype(np.int64)
+        self.cvc = c["vertex_count"].astype(np.int64)
+        self.ctc = c["triangle_count"].astype(np.int64)
+        self.cpoff = c["page_offset"].astype(np.int64)
+        p = np.frombuffer(d, PAGE_DT, count=P, offset=self.pt_off)
+        self.poff = p["offset"].astype(np.uint64)
+        self.pcsize = p["compressed_size"].astype(np.int64)
+        self.prsize = p["raw_size"].astype(np.int64)
+        self.pchecksum = p["checksum"].copy()
+        self.pfirst = p["first_cluster"].astype(np.int64)
+        self.pcount = p["cluster_count"].astype(np.int64)
+        self.pgfirst = p["first_group"].astype(np.int64)
+        self.pgcount = p["group_count"].astype(np.int64)
+        self.pdfirst = p["dependency_first"].astype(np.int64)
+        self.pdcount = p["dependency_count"].astype(np.int64)
+        self.deps = np.frombuffer(d, "<u4", count=self.D, offset=self.pt_off + P * PAGE_SIZE).astype(np.int64)
+
+    # -- section 3: groups and clusters -------------------------------------------
+    def check_groups(self):
+        r, G, C, P = self.r, self.G, self.C, self.P
+        bad_sphere = ~np.isfinite(self.gcenter).all(axis=1) | ~np.isfinite(self.gradius)
+        r.violations_where("group_sphere", bad_sphere,
+                           lambda g: f"group {g}: non-finite sphere centre {self.gcenter[g].tolist()} radius {self.gradius[g]}")
+        neg_r = np.isfinite(self.gradius) & (self.gradius < 0)
+        r.violations_where("group_sphere", neg_r, lambda g: f"group {g}: negative radius {self.gradius[g]}")
+        bad_err = np.isnan(self.gerror) | (self.gerror < 0)
+        r.violations_where("group_error", bad_err, lambda g: f"group {g}: error {self.gerror[g]} is NaN or negative")
+        empty = self.gcount == 0
+        r.violations_where("group_cluster_range", empty, lambda g: f"group {g}: cluster_count is 0")
+        out = self.gfirst + self.gcount > C
+        r.violations_where("group_cluster_range", out,
+                           lambda g: f"group {g}: clusters {self.gfirst[g]}..{self.gfirst[g] + self.gcount[g]} beyond C={C}")
+        bad_page = self.gpage >= P
+        r.violations_where("group_page", bad_page, lambda g: f"group {g}: page {self.gpage[g]} >= P={P}")
+        bad_level = self.glevel >= self.level_count
+        r.violations_where("group_level", bad_level,
+                           lambda g: f"group {g}: level {self.glevel[g]} >= level_count {self.level_count}")
+        r.violations_where("reserved_nonzero", self.greserved != 0, lambda g: f"group {g}: reserved field is {self.greserved[g]}")
+        if G and not bad_level.any() and self.level_count != int(self.glevel.max()) + 1:
+            r.violation("level_count", f"level_count {self.level_count} != max group level + 1 = {int(self.glevel.max()) + 1}")
+        if G == 0 and self.level_count != 0:
+            r.note("level_count", f"no groups but level_count {self.level_count}")
+        r.violations_where("group_order", np.flatnonzero(self.glevel[1:] > self.glevel[:-1]) + 1,
+                           lambda g: f"group {g} (level {self.glevel[g]}) follows group {g - 1} (level {self.glevel[g - 1]}): "
+                                     "groups must be stored coarse to fine (descending level)")
+        self.group_ok = ~(bad_sphere | neg_r | bad_err | empty | out | bad_page | bad_level)
+        self.gend = self.gfirst + self.gcount
+
+    def check_clusters(self):
+        r, G, C = self.r, self.G, self.C
+        bad_group = self.cgroup >= G
+        r.violations_where("cluster_group", bad_group, lambda c: f"cluster {c}: group {self.cgroup[c]} >= G={G}")
+        self.has_own = self.cown != NONE
+        bad_own = self.has_own & (self.cown >= G)
+        r.violations_where("cluster_own_group", bad_own, lambda c: f"cluster {c}: own_group {self.cown[c]} >= G={G}")
+        bad_vc = (self.cvc < 1) | (self.cvc > 256)
+        r.violations_where("cluster_counts", bad_vc, lambda c: f"cluster {c}: vertex_count {self.cvc[c]} outside 1..=256")
+        bad_tc = (self.ctc < 1) | (self.ctc > 128)
+        r.violations_where("cluster_counts", bad_tc, lambda c: f"cluster {c}: triangle_count {self.ctc[c]} outside 1..=128")
+        idx = np.arange(C, dtype=np.int64)
+        if G:
+            gsafe = np.where(bad_group, 0, self.cgroup)
+            outside = ~bad_group & ((idx < self.gfirst[gsafe]) | (idx >= self.gend[gsafe]))
+        else:
+            outside = np.zeros(C, dtype=bool)
+        r.violations_where("cluster_outside_group", outside,
+                           lambda c: f"cluster {c}: not inside its group {self.cgroup[c]}'s range "
+                                     f"{self.gfirst[self.cgroup[c]]}..{self.gend[self.cgroup[c]]}")
+        # group ranges must cover every cluster exactly once (each cluster is a
+        # member of exactly one group, the one its record names)
+        ok = ~(self.gfirst + self.gcount > C)
+        cov = np.zeros(C + 1, dtype=np.int64)
+        np.add.at(cov, self.gfirst[ok], 1)
+        np.add.at(cov, self.gend[ok], -1)
+        cov = np.cumsum(cov)[:C]
+        r.violations_where("group_ranges_coverage", cov != 1,
+                           lambda c: f"cluster {c}: lies in {cov[c]} group ranges (must be exactly 1)")
+        if G and ok.all():
+            tiled = self.gfirst[0] == 0 and (self.gfirst[1:] == self.gend[:-1]).all() and self.gend[-1] == C
+            if not tiled:
+                r.note("group_ranges_order", "group cluster ranges do not follow group order (not required explicitly)")
+        self.cluster_refs_ok = not (bad_group.any() or bad_own.any() or outside.any())
+        self.cluster_ok = ~(bad_group | bad_own | bad_vc | bad_tc | outside)
+
+    # -- section 4: pages ------------------------------------------------------
+    def check_pages(self):
+        r, G, C, P, D = self.r, self.G, self.C, self.P, self.D
+        n = len(self.data)
+        poff = self.poff.astype(np.float64)  # u64 may exceed int64
+        end = poff + self.pcsize
+        before = poff < self.pt_end
+        r.violations_where("page_bytes", before,
+                           lambda p: f"page {p}: offset {int(self.poff[p])} lies before the page data ({self.pt_end})")
+        past = end > n
+        r.violations_where("page_bytes", past,
+                           lambda p: f"page {p}: bytes {int(self.poff[p])}..{int(self.poff[p]) + self.pcsize[p]} "
+                                     f"lie outside the file ({n} bytes; truncated?)")
+        big = self.prsize > MAX_RAW_SIZE
+        r.violations_where("page_raw_size", big, lambda p: f"page {p}: raw_size {self.prsize[p]} > 16 MiB")
+        bad_cr = self.pfirst + self.pcount > C
+        r.violations_where("page_cluster_range", bad_cr,
+                           lambda p: f"page {p}: clusters {self.pfirst[p]}..{self.pfirst[p] + self.pcount[p]} beyond C={C}")
+        bad_gr = self.pgfirst + self.pgcount > G
+        r.violations_where("page_group_range", bad_gr,
+                           lambda p: f"page {p}: groups {self.pgfirst[p]}..{self.pgfirst[p] + self.pgcount[p]} beyond G={G}")
+        bad_dr = self.pdfirst + self.pdcount > D
+        r.violations_where("page_dependency_range", bad_dr,
+                           lambda p: f"page {p}: dependencies {self.pdfirst[p]}..{self.pdfirst[p] + self.pdcount[p]} beyond D={D}")
+        r.notes_where("empty_page", (self.pcount == 0) | (self.pgcount == 0),
+                      lambda p: f"page {p}: {self.pcount[p]} clusters, {self.pgcount[p]} groups")
+        self.page_ok = ~(before | past | big | bad_cr | bad_gr | bad_dr)
+        # page bytes are stored in page order (section 1: "in page order")
+        if P > 1:
+            overlap = np.flatnonzero(poff[1:] < end[:-1]) + 1
+            r.violations_where("page_order", overlap,
+                               lambda p: f"page {p}: bytes start at {int(self.poff[p])}, before the end of page {p - 1} "
+                                         f"({int(end[p - 1])}); page bytes must be stored in page order")
+            gaps = np.flatnonzero(poff[1:] > end[:-1]) + 1
+            r.notes_where("page_gap", gaps, lambda p: f"page {p}: {int(poff[p] - end[p - 1])} unused bytes before it")
+        if P:
+            if self.poff[0] != self.pt_end:
+                r.note("page_gap", f"page 0 starts at {int(self.poff[0])}, page table ends at {self.pt_end}")
+            last = int(end.max())
+            if last < n:
+                r.note("trailing_bytes", f"{n - last} bytes after the last page")
+        # clusters are numbered page by page: page cluster ranges tile 0..C in order
+        tiled = True
+        if P:
+            exp_first = np.concatenate([[0], np.cumsum(self.pcount)[:-1]])
+            bad_tile = np.flatnonzero(self.pfirst != exp_first)
+            r.violations_where("page_cluster_tiling", bad_tile,
+                               lambda p: f"page {p}: first_cluster {self.pfirst[p]} but pages before it hold {exp_first[p]} clusters "
+                                         "(clusters are numbered page by page)")
+            if int(self.pcount.sum()) != C:
+                r.violation("page_cluster_tiling", f"pages hold {int(self.pcount.sum())} clusters, C={C}")
+                tiled = False
+            tiled = tiled and bad_tile.size == 0
+        elif C:
+            r.violation("page_cluster_tiling", f"no pages but C={C}")
+            tiled = False
+        self.cpage = np.repeat(np.arange(P, dtype=np.int64), self.pcount) if tiled else None
+        # each group lies in exactly one page's group range, and names that page
+        okp = ~bad_gr
+        cov = np.zeros(G + 1, dtype=np.int64)
+        np.add.at(cov, self.pgfirst[okp], 1)
+        np.add.at(cov, (self.pgfirst + self.pgcount)[okp], -1)
+        cov = np.cumsum(cov)[:G]
+        r.violations_where("page_group_coverage", cov != 1,
+                           lambda g: f"group {g}: lies in {cov[g]} page group ranges (must be exactly 1)")
+        if okp.all() and (cov == 1).all():
+            owner = np.zeros(G, dtype=np.int64)
+            order = np.argsort(self.pgfirst, kind="stable")
+            for p in order:
+                owner[self.pgfirst[p]:self.pgfirst[p] + self.pgcount[p]] = p
+            r.violations_where("group_page", (owner != self.gpage),
+                               lambda g: f"group {g}: record says page {self.gpage[g]} but page {owner[g]}'s group range holds it")
+            if P and not (self.pgfirst == np.concatenate([[0], np.cumsum(self.pgcount)[:-1]])).all():
+                r.note("page_group_order", "page group ranges are not in page order")
+        # a group's clusters lie inside its page (section 7)
+        gp_ok = self.group_ok & (self.gpage < P)
+        gps = np.where(gp_ok, self.gpage, 0)
+        if P:
+            inside = (self.gfirst >= self.pfirst[gps]) & (self.gend <= self.pfirst[gps] + self.pcount[gps])
+            r.violations_where("group_not_in_page", gp_ok & ~inside,
+                               lambda g: f"group {g}: clusters {self.gfirst[g]}..{self.gend[g]} not inside page {self.gpage[g]}'s "
+                                         f"clusters {self.pfirst[self.gpage[g]]}..{self.pfirst[self.gpage[g]] + self.pcount[self.gpage[g]]}")
+        if self.cpage is not None:
+            exp_off = CLUSTER_HEADER_SIZE * (np.arange(C, dtype=np.int64) - self.pfirst[self.cpage])
+            r.violations_where("cluster_page_offset", self.cpoff != exp_off,
+                               lambda c: f"{self.cl(c)}: page_offset {self.cpoff[c]} != 48*(index in page) = {exp_off[c]}")
+            if self.cluster_refs_ok:
+                gp = self.gpage[self.cgroup]
+                r.violations_where("cluster_page", gp != self.cpage,
+                                   lambda c: f"cluster {c}: stored in page {self.cpage[c]} but its group {self.cgroup[c]} "
+                                             f"says page {gp[c]}")
+        # coarse to fine: the first page holds a root group
+        if P and G and not bad_gr[0]:
+            gs = np.arange(self.pgfirst[0], self.pgfirst[0] + self.pgcount[0])
+            if not np.isinf(self.gerror[gs]).any():
+                r.note("first_page_root", "page 0 holds no root group (spec: pages are stored coarse to fine, root first)")
+
+    def check_dependencies(self):
+        r, P = self.r, self.P
+        actual = set()
+        for p in range(P):
+            if self.pdfirst[p] + self.pdcount[p] > self.D:
+                continue
+            lst = self.deps[self.pdfirst[p]:self.pdfirst[p] + self.pdcount[p]]
+            oor = lst >= P
+            if oor.any():
+                r.violation("dependency_range", f"page {p}: dependency {int(lst[oor][0])} >= P={P}", int(oor.sum()))
+            if (lst == p).any():
+                r.violation("dependency_self", f"page {p}: depends on itself")
+            if lst.size > 1 and not (np.diff(lst) > 0).all():
+                r.violation("dependency_order", f"page {p}: dependencies {lst[:8].tolist()}... not strictly ascending")
+            for q in lst.tolist():
+                actual.add((p, q))
+        if P > 0 and self.P and self.pdcount.sum() and self.D:
+            # dependency ranges tile the array in page order? (informative)
+            exp = np.concatenate([[0], np.cumsum(self.pdcount)[:-1]])
+            if not (self.pdfirst == exp).all() or int(self.pdcount.sum()) != self.D:
+                r.note("dependency_layout", "dependency ranges do not tile the dependency array in page order")
+        self.dep_actual = actual
+        if self.cpage is None or not self.cluster_refs_ok or not (self.gpage < P).all():
+            r.note("dependency_check_skipped", "expected dependencies not computed (earlier violations)")
+            return
+        expected = set()
+        outs = np.flatnonzero(self.has_own)
+        own = self.cown[outs]
+        # outputs of p's groups: page of group own[c] depends on the page of c
+        for a, b in set(zip(self.gpage[own].tolist(), self.cpage[outs].tolist())):
+            if a != b:
+                expected.add((a, b))
+        # siblings: all output pages of one group depend on each other
+        pages_of = {}
+        for g, q in set(zip(own.tolist(), self.cpage[outs].tolist())):
+            pages_of.setdefault(g, set()).add(q)
+        for qs in pages_of.values():
+            if len(qs) > 1:
+                for a in qs:
+                    for b in qs:
+                        if a != b:
+                            expected.add((a, b))
+        missing = sorted(expected - actual)
+        extra = sorted(actual - expected)
+        for a, b in missing[:MAX_EXAMPLES]:
+            r.violation("dependency_missing", f"page {a}: should depend on page {b} (parents or siblings of its clusters live there)", 0)
+        if missing:
+            r.violations["dependency_missing"]["count"] += len(missing)
+        for a, b in extra[:MAX_EXAMPLES]:
+            r.violation("dependency_extra", f"page {a}: depends on page {b}, which holds neither outputs of its groups "
+                                            "nor siblings of its clusters", 0)
+        if extra:
+            r.violations["dependency_extra"]["count"] += len(extra)
+        # dependencies on later pages break "a prefix is a usable coarse model" (informative)
+        later = sum(1 for a, b in actual if b > a)
+        if later:
+            r.note("dependency_on_later_page", f"{later} dependencies point to later pages", later)
+        self.r.figures["dependencies"] = len(actual)
+
+    # -- section 6 invariants ------------------------------------------------
+    def check_invariants(self):
+        r, G = self.r, self.G
+        if not self.cluster_refs_ok or not self.group_ok.all():
+            r.note("invariants_skipped", "DAG invariants not checked (earlier violations in groups/clusters)")
+            return
+        ho = self.has_own
+        own = np.where(ho, self.cown, 0)
+        par = self.cgroup
+        self.root = np.isposinf(self.gerror)
+        nroots = int(self.root.sum())
+        if nroots == 0:
+            r.violation("no_root_group", "no group has error +inf")
+        self.own_err = np.where(ho, self.gerror[own], np.float32(0))
+        self.par_err = self.gerror[par]
+        mono = ho & (self.par_err < self.own_err)
+        r.violations_where("monotone_error", mono,
+                           lambda c: f"{self.cl(c)}: parent group {par[c]} error {fmt_f(self.par_err[c])} < "
+                                     f"own group {own[c]} error {fmt_f(self.own_err[c])}")
+        cp = self.gcenter[par].astype(np.float64)
+        co = self.gcenter[own].astype(np.float64)
+        dist = np.sqrt(((cp - co) ** 2).sum(axis=1))
+        rp = self.gradius[par].astype(np.float64)
+        ro = self.gradius[own].astype(np.float64)
+        slack = rp - (dist + ro)
+        nested_bad = ho & (slack < 0)
+        r.violations_where("nested_spheres", nested_bad,
+                           lambda c: f"{self.cl(c)}: own group {own[c]} sphere (r={fmt_f(ro[c])}) not inside parent group "
+                                     f"{par[c]} sphere (r={fmt_f(rp[c])}, centre distance {fmt_f(dist[c])}; "
+                                     f"excess {fmt_f(-slack[c])})")
+        dag_bad = ho & (self.glevel[own] >= self.glevel[par])
+        r.violations_where("dag_order", dag_bad,
+                           lambda c: f"{self.cl(c)}: own group {own[c]} level {self.glevel[own[c]]} >= "
+                                     f"group {par[c]} level {self.glevel[par[c]]}")
+        outputs = np.bincount(own[ho], minlength=G)
+        r.violations_where("root_group_has_outputs", self.root & (outputs > 0),
+                           lambda g: f"{self.gl(g)}: root group (error +inf) produced {outputs[g]} clusters")
+        r.violations_where("group_without_outputs", ~self.root & (outputs == 0),
+                           lambda g: f"{self.gl(g)}: finite error {fmt_f(self.gerror[g])} but no cluster has it as own_group")
+        self.clevel = np.where(ho, self.glevel[own] + 1, 0)
+        # level of a group vs. its members (informative: the spec only says a
+        # group's level is the level "at which it was formed")
+        maxmember = np.full(G, -1, dtype=np.int64)
+        np.maximum.at(maxmember, par, self.clevel)
+        r.notes_where("group_level_vs_members", maxmember != self.glevel,
+                      lambda g: f"{self.gl(g)}: highest member level is {maxmember[g]}")
+        minmember = np.full(G, 1 << 40, dtype=np.int64)
+        np.minimum.at(minmember, par, self.clevel)
+        r.notes_where("mixed_level_group", minmember != maxmember,
+                      lambda g: f"{self.gl(g)}: member levels {minmember[g]}..{maxmember[g]}")
+        self.outputs = outputs
+        self.invariants_done = True
+        # figures
+        L = int(self.glevel.max()) + 1 if G else 0
+        per_level = []
+        for lv in range(max(L, int(self.clevel.max()) + 1 if self.C else 0)):
+            m = self.clevel == lv
+            per_level.append({"level": lv, "clusters": int(m.sum()), "groups": int((self.glevel == lv).sum()),
+                              "triangles": int(self.ctc[m].sum())})
+        f = r.figures
+        f["levels"] = L
+        f["per_level"] = per_level
+        f["root_groups"] = nroots
+        f["root_clusters"] = int(self.root[par].sum())
+        l0 = self.clevel == 0
+        f["level0_clusters"] = int(l0.sum())
+        f["level0_triangles"] = int(self.ctc[l0].sum())
+        f["level0_fill"] = float(self.ctc[l0].sum() / l0.sum()) if l0.any() else 0.0
+        f["min_nested_slack"] = float(slack[ho].min()) if ho.any() else None
+
+    # -- section 4.3 / 5: page contents ----------------------------------------------
+    def decode_pages(self):
+        r, C, P = self.r, self.C, self.P
+        t = time.perf_counter()
+        self.page_decoded = np.zeros(P, dtype=bool)
+        chunks = []
+        base = np.zeros(P, dtype=np.int64)
+        hdr = np.zeros(C, dtype=CHDR_DT)
+        have_hdr = np.zeros(C, dtype=bool)
+        pos = 0
+        frames = []
+        for p in range(P):
+            if not self.page_ok[p]:
+                continue
+            o = int(self.poff[p])
+            comp = bytes(self.data[o:o + int(self.pcsize[p])])
+            if blake3.blake3(comp).digest() != bytes(self.pchecksum[p]):
+                r.violation("page_checksum", f"page {p}: BLAKE3 of its {len(comp)} compressed bytes does not match the page record")
+                continue
+            rs = int(self.prsize[p])
+            try:
+                raw = decompress_frames(comp, rs)
+            except zstandard.ZstdError as exc:
+                r.violation("page_decompress", f"page {p}: zstd error: {exc}")
+                continue
+            if len(raw) != rs:
+                more = "more than" if len(raw) > rs else f"{len(raw)} bytes,"
+                r.violation("page_raw_size", f"page {p}: decompresses to {more} raw_size {rs}")
+                continue
+            if len(frames) < 64:
+                frames.append(count_frames(comp))
+            n = int(self.pcount[p])
+            if CLUSTER_HEADER_SIZE * n > rs:
+                r.violation("page_headers", f"page {p}: {n} cluster headers do not fit in {rs} bytes")
+                continue
+            first = int(self.pfirst[p])
+            hdr[first:first + n] = np.frombuffer(raw, CHDR_DT, count=n)
+            have_hdr[first:first + n] = True
+            self.page_decoded[p] = True
+            base[p] = pos
+            pad = (-len(raw)) % 4
+            chunks.append(raw)
+            if pad:
+                chunks.append(b"\0" * pad)
+            pos += len(raw) + pad
+        chunks.append(b"\0" * 8)
+        buf = b"".join(chunks)
+        self.bytes_arr = np.frombuffer(buf, dtype=np.uint8)
+        self.words = np.frombuffer(buf, dtype="<u4")
+        self.page_base = base
+        self.hdr = hdr
+        self.have_hdr = have_hdr
+        r.figures["zstd_frames_per_page"] = sorted(set(frames))
+        self._lap("decompress", t)
+
+    def check_cluster_headers(self):
+        r, C = self.r, self.C
+        h = self.hdr
+        if self.cpage is None:
+            self.hdr_ok = np.zeros(C, dtype=bool)
+            return
+        have = self.have_hdr
+        page = self.cpage
+        rsize = self.prsize[page]
+        hdr_end = CLUSTER_HEADER_SIZE * self.pcount[page]
+        vc = h["vertex_count"].astype(np.int64)
+        tc = h["triangle_count"].astype(np.int64)
+        cnt_bad = have & ((vc != self.cvc) | (tc != self.ctc))
+        r.violations_where("cluster_header_counts", cnt_bad,
+                           lambda c: f"{self.cl(c)}: header counts {vc[c]} vertices/{tc[c]} triangles, record says "
+                                     f"{self.cvc[c]}/{self.ctc[c]}")
+        pb = h["position_bits"].astype(np.int64)
+        pb_bad = have & (pb > 32).any(axis=1)
+        r.violations_where("cluster_position_bits", pb_bad, lambda c: f"{self.cl(c)}: position_bits {pb[c].tolist()} > 32")
+        res_bad = have & ((h["reserved0"] != 0) | (h["reserved1"] != 0))
+        r.violations_where("reserved_nonzero", res_bad, lambda c: f"{self.cl(c)}: cluster header reserved fields not zero")
+        nb = h["normal_bits"].astype(np.int64)
+        has_n = bool(self.flags & FLAG_NORMALS)
+        nb_bad = have & has_n & (nb > self.normal_bits).any(axis=1)
+        r.violations_where("cluster_normal_bits", nb_bad,
+                           lambda c: f"{self.cl(c)}: normal_bits {nb[c].tolist()} > header normal_bits {self.normal_bits}")
+        bad = cnt_bad | pb_bad | nb_bad
+        lengths = {
+            "positions_offset": (True, (vc * pb.sum(axis=1) + 31) // 32 * 4),
+            "normals_offset": (has_n, (vc * nb.sum(axis=1) + 31) // 32 * 4),
+            "uvs_offset": (bool(self.flags & FLAG_UVS), 4 * vc),
+            "indices_offset": (True, 3 * tc),
+            "materials_offset": (bool(self.flags & FLAG_MATERIALS), 2 * tc),
+        }
+        blocks = []
+        for name, (present, length) in lengths.items():
+            off = h[name].astype(np.int64)
+            if present:
+                miss = have & (off == 0)
+                r.violations_where("cluster_block_presence", miss, lambda c, n=name: f"{self.cl(c)}: {n} is 0 (block absent) "
+                                   "but the block is required")
+            else:
+                miss = have & (off != 0)
+                r.violations_where("cluster_block_presence", miss, lambda c, n=name: f"{self.cl(c)}: {n} is {off[c]} "
+                                   "but the header flag for this block is not set")
+            align = have & (off % 4 != 0)
+            r.violations_where("cluster_block_alignment", align, lambda c, n=name: f"{self.cl(c)}: {n} {off[c]} not a multiple of 4")
+            bounds = have & present & (off != 0) & ((off < hdr_end) | (off + length > rsize))
+            r.violations_where("cluster_block_bounds", bounds,
+                               lambda c, n=name: f"{self.cl(c)}: {n} block {off[c]}..{off[c] + length[c]} not inside the page's "
+                                                 f"data area {hdr_end[c]}..{rsize[c]}")
+            bad |= miss | align | bounds
+            if present:
+                blocks.append((off, length))
+        # overlapping blocks (informative; the spec does not forbid sharing)
+        ok = have & ~bad
+        if blocks and ok.any():
+            cs = np.flatnonzero(ok)
+            starts = np.concatenate([b[0][cs] for b in blocks])
+            ends = np.concatenate([b[0][cs] + b[1][cs] for b in blocks])
+            pg = np.tile(page[cs], len(blocks))
+            owner = np.tile(cs, len(blocks))
+            nonempty = ends > starts
+            starts, ends, pg, owner = starts[nonempty], ends[nonempty], pg[nonempty], owner[nonempty]
+            order = np.lexsort((starts, pg))
+            s, e, q, o = starts[order], ends[order], pg[order], owner[order]
+            big = np.int64(1 << 26)  # > any offset in a page: keeps the running maximum per page
+            ov = np.flatnonzero((q[1:] == q[:-1]) & (s[1:] + q[1:] * big < np.maximum.accumulate(e + q * big)[:-1]))
+            r.notes_where("block_overlap", ov, lambda i: f"page {q[i + 1]}: block of cluster {o[i + 1]} at {s[i + 1]} "
+                                                       "overlaps an earlier block")
+        self.hdr_ok = have & ~bad & self.cluster_ok
+
+    def decode_clusters(self):
+        """Decode positions, normals, UVs, indices and materials of every
+        cluster whose header passed (vectorized over all clusters)."""
+        r, C = self.r, self.C
+        t = time.perf_counter()
+        h = self.hdr
+        ok = self.hdr_ok
+        cs = np.flatnonzero(ok)
+        vc = np.where(ok, self.cvc, 0)
+        tc = np.where(ok, self.ctc, 0)
+        self.vbase = np.concatenate([[0], np.cumsum(vc)])
+        self.tbase = np.concatenate([[0], np.cumsum(tc)])
+        page = self.cpage if self.cpage is not None else np.zeros(C, dtype=np.int64)
+        cbase = self.page_base[page] if self.P else np.zeros(C, dtype=np.int64)
+        vcl = np.repeat(np.arange(C, dtype=np.int64), vc)  # cluster of each vertex
+        vloc = seg_arange(vc)                                 # vertex index in cluster
+        words = self.words
+        # positions
+        pb = h["position_bits"].astype(np.int64)
+        stride = pb.sum(axis=1)
+        w0 = (cbase + h["positions_offset"].astype(np.int64)) // 4
+        pmin = h["position_min"].astype(np.int64)
+        q = np.empty((vcl.size, 3), dtype=np.int64)
+        pref = 0
+        for k in range(3):
+            bit = vloc * stride[vcl] + (pref if isinstance(pref, int) else pref[vcl])
+            q[:, k] = pmin[vcl, k] + read_bits(words, w0[vcl], bit, pb[vcl, k])
+            pref = pb[:, 0] if k == 0 else pb[:, 0] + pb[:, 1]
+        over = (q < -(1 << 31)) | (q >= (1 << 31))
+        if over.any():
+            vs = np.flatnonzero(over.any(axis=1))
+            r.violations_where("position_overflow", vs,
+                               lambda v: f"{self.cl(vcl[v])}: vertex {vloc[v]} grid coordinate {q[v].tolist()} overflows i32")
+        if cs.size:
+            mins = np.minimum.reduceat(q, self.vbase[cs], axis=0) if vcl.size else np.zeros((0, 3))
+            bad = np.flatnonzero((mins - pmin[cs] != 0).any(axis=1))
+            r.violations_where("position_min", cs[bad],
+                               lambda c: f"{self.cl(c)}: position_min {pmin[c].tolist()} but the smallest decoded grid "
+                                         f"coordinates are {mins[np.searchsorted(cs, c)].tolist()}")
+        self.q = q
+        self.vcl = vcl
+        # object-space positions, f32: origin + f32(q) * step
+        self.pos = self.origin[None, :] + q.astype(np.float32) * self.step
+        # normals
+        if self.flags & FLAG_NORMALS and self.normals_decodable and vcl.size:
+            nb = h["normal_bits"].astype(np.int64)
+            nmin = h["normal_min"].astype(np.int64)
+            w0 = (cbase + h["normals_offset"].astype(np.int64)) // 4
+            nst = nb.sum(axis=1)
+            a = nmin[vcl, 0] + read_bits(words, w0[vcl], vloc * nst[vcl], nb[vcl, 0])
+            b = nmin[vcl, 1] + read_bits(words, w0[vcl], vloc * nst[vcl] + nb[vcl, 0], nb[vcl, 1])
+            M = (1 << self.normal_bits) - 1
+            rng_bad = np.flatnonzero((a > M) | (b > M))
+            r.violations_where("normal_range", rng_bad,
+                               lambda v: f"{self.cl(vcl[v])}: vertex {vloc[v]} octahedral value ({a[v]}, {b[v]}) > {M}")
+            if cs.size:
+                ab = np.stack([a, b], axis=1)
+                mins = np.minimum.reduceat(ab, self.vbase[cs], axis=0)
+                bad = np.flatnonzero((mins != nmin[cs]).any(axis=1))
+                r.violations_where("normal_min", cs[bad],
+                                   lambda c: f"{self.cl(c)}: normal_min {nmin[c].tolist()} but the smallest decoded values are "
+                                             f"{mins[np.searchsorted(cs, c)].tolist()}")
+            f32 = np.float32
+            Mf = f32(M)
+            x = a.astype(f32) / Mf * f32(2) - f32(1)
+            y = b.astype(f32) / Mf * f32(2) - f32(1)
+            z = f32(1) - np.abs(x) - np.abs(y)
+            sx = np.where(x >= 0, f32(1), f32(-1))
+            sy = np.where(y >= 0, f32(1), f32(-1))
+            fold = z < 0
+            x2 = np.where(fold, (f32(1) - np.abs(y)) * sx, x)
+            y2 = np.where(fold, (f32(1) - np.abs(x)) * sy, y)
+            nrm = np.stack([x2, y2, z], axis=1)
+            length = np.sqrt((nrm * nrm).sum(axis=1))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                nrm = nrm / length[:, None]
+            r.violations_where("normal_decode", ~np.isfinite(nrm).all(axis=1),
+                               lambda v: f"{self.cl(vcl[v])}: vertex {vloc[v]} normal does not decode to a unit vector")
+            self.normals = nrm
+        # UVs
+        bytes_arr = self.bytes_arr
+        if self.flags & FLAG_UVS and vcl.size:
+            p0 = cbase[vcl] + h["uvs_offset"].astype(np.int64)[vcl] + 4 * vloc
+            u = bytes_arr[p0].astype(np.int64) | (bytes_arr[p0 + 1].astype(np.int64) << 8)
+            v = bytes_arr[p0 + 2].astype(np.int64) | (bytes_arr[p0 + 3].astype(np.int64) << 8)
+            uv = np.stack([u, v], axis=1).astype(np.float32)
+            self.uvs = self.uv_min[None, :] + (uv / np.float32(65535)) * self.uv_extent[None, :]
+            r.violations_where("uv_decode", ~np.isfinite(self.uvs).all(axis=1),
+                               lambda i: f"{self.cl(vcl[i])}: vertex {vloc[i]} UV is not finite")
+        # indices
+        ncorner = 3 * tc
+        ccl = np.repeat(np.arange(C, dtype=np.int64), ncorner)
+        cloc = seg_arange(ncorner)
+        idx = bytes_arr[cbase[ccl] + h["indices_offset"].astype(np.int64)[ccl] + cloc].astype(np.int64)
+        ib = np.flatnonzero(idx >= vc[ccl])
+        r.violations_where("index_out_of_range", ib,
+                           lambda i: f"{self.cl(ccl[i])}: triangle {cloc[i] // 3} index {idx[i]} >= vertex_count {vc[ccl[i]]}")
+        self.indices_ok = ib.size == 0
+        self.tri_local = idx.reshape(-1, 3)
+        self.tcl = np.repeat(np.arange(C, dtype=np.int64), tc)
+        tl = self.tri_local
+        degen = (tl[:, 0] == tl[:, 1]) | (tl[:, 1] == tl[:, 2]) | (tl[:, 0] == tl[:, 2])
+        r.notes_where("degenerate_index_triangle", degen,
+                      lambda i: f"{self.cl(self.tcl[i])}: triangle {i - self.tbase[self.tcl[i]]} repeats a vertex index")
+        # materials
+        if self.flags & FLAG_MATERIALS and tc.sum():
+            tloc = seg_arange(tc)
+            p0 = cbase[self.tcl] + h["materials_offset"].astype(np.int64)[self.tcl] + 2 * tloc
+            mat = bytes_arr[p0].astype(np.int64) | (bytes_arr[p0 + 1].astype(np.int64) << 8)
+            self.materials = mat
+            r.figures["materials"] = np.unique(mat).tolist()[:64]
+        vertex_unused = np.ones(vcl.size, dtype=bool)
+        if self.indices_ok and vcl.size:
+            vertex_unused[self.vbase[self.tcl][:, None] + tl] = False
+            r.notes_where("unreferenced_vertex", vertex_unused,
+                          lambda v: f"{self.cl(vcl[v])}: vertex {vloc[v]} is not used by any triangle")
+        self.complete = bool(ok.all() and self.indices_ok and not over.any() and C > 0)
+        self._lap("decode", t)
+
+    # -- welding and edges ----------------------------------------------------
+    def build_topology(self):
+        t = time.perf_counter()
+        q = self.q
+        lo = q.min(axis=0)
+        span = q.max(axis=0) - lo + 1
+        if float(span[0]) * float(span[1]) * float(span[2]) < 2.0 ** 62:
+            key = ((q[:, 0] - lo[0]) * span[1] + (q[:, 1] - lo[1])) * span[2] + (q[:, 2] - lo[2])
+            _, first, wid = np.unique(key, return_index=True, return_inverse=True)
+        else:
+            qc = np.ascontiguousarray(q)
+            _, first, wid = np.unique(qc, axis=0, return_index=True, return_inverse=True)
+        wid = wid.reshape(-1)
+        self.NW = int(first.size)
+        self.wq = q[first]                     # grid coordinate of each welded vertex
+        # trimesh meshes are built in grid units (distances x grid_step = object
+        # space): trimesh's closest-point code uses absolute tolerances (1e-12 on
+        # squared lengths) that give wrong answers for triangles of ~1e-3 size.
+        self.qcentre = np.round((self.wq.min(axis=0) + self.wq.max(axis=0)) / 2)
+        self.wgrid = (self.wq - self.qcentre).astype(np.float64)
+        tw = wid[self.vbase[self.tcl][:, None] + self.tri_local]
+        self.tw = tw
+        degen = (tw[:, 0] == tw[:, 1]) | (tw[:, 1] == tw[:, 2]) | (tw[:, 0] == tw[:, 2])
+        self.r.notes_where("degenerate_welded_triangle", degen,
+                           lambda i: f"{self.cl(self.tcl[i])}: triangle {i - self.tbase[self.tcl[i]]} has two vertices "
+                                     "with the same grid coordinate")
+        a = tw
+        b = tw[:, [1, 2, 0]]
+        elo = np.minimum(a, b)
+        ehi = np.maximum(a, b)
+        ekey = elo * self.NW + ehi
+        ukeys, eid = np.unique(ekey.reshape(-1), return_inverse=True)
+        self.eid = eid.reshape(-1, 3)
+        self.E = int(ukeys.size)
+        self.ekeys = ukeys
+        level0 = self.clevel == 0
+        self.tri_l0 = level0[self.tcl]
+        self.L0 = np.bincount(self.eid[self.tri_l0].reshape(-1), minlength=self.E)
+        self.special = (self.L0 > 0) & (self.L0 != 2)
+        f = self.r.figures
+        f["welded_vertices"] = self.NW
+        f["level0_boundary_edges"] = int((self.L0 == 1).sum())
+        f["level0_nonmanifold_edges"] = int((self.L0 > 2).sum())
+        self._lap("topology", t)
+
+    def edge_desc(self, e):
+        k = int(self.ekeys[e])
+        a, b = divmod(k, self.NW)
+        return f"edge {self.wq[a].tolist()}-{self.wq[b].tolist()}"
+
+    def bad_edges(self, cnt):
+        return np.where(self.special, cnt != self.L0, (cnt != 0) & (cnt != 2))
+
+    def describe_cut_failure(self, name, sel, cnt, bad):
+        bad_idx = np.flatnonzero(bad)
+        e = int(bad_idx[0])
+        tris = np.flatnonzero(np.repeat(sel, np.where(self.hdr_ok, self.ctc, 0)) & (self.eid == e).any(axis=1))
+        cls = sorted(set(self.tcl[tris].tolist()))
+        where = ", ".join(self.cl(c) for c in cls[:4]) or "no selected cluster"
+        return (f"{name}: {bad_idx.size} edges with wrong use count, e.g. {self.edge_desc(e)} used {cnt[e]} times "
+                f"(level 0: {self.L0[e]}; must be {self.L0[e] if self.special[e] else '0 or 2'}) in {where}")
+
+    def cluster_tris_mask(self, sel):
+        return np.repeat(sel, np.where(self.hdr_ok, self.ctc, 0))
+
+    def check_cut(self, name, sel):
+        tm = self.cluster_tris_mask(sel)
+        cnt = np.bincount(self.eid[tm].reshape(-1), minlength=self.E)
+        bad = self.bad_edges(cnt)
+        if bad.any():
+            self.r.violation("cracked_cut", self.describe_cut_failure(name, sel, cnt, bad))
+            return False
+        return True
+
+    def uniform_thresholds(self):
+        fin = self.gerror[np.isfinite(self.gerror)].astype(np.float64)
+        return np.unique(np.concatenate([[0.0], fin]))
+
+    def uniform_sel(self, t):
+        return (self.own_err <= t) & (t < self.par_err)
+
+    def check_uniform_cuts(self):
+        """Every uniform cut (spec section 6), incrementally: a cluster is drawn
+        for thresholds T[i] with enter <= i < leave."""
+        t0 = time.perf_counter()
+        T = self.uniform_thresholds()
+        self.T = T
+        own = self.own_err.astype(np.float64)
+        par = self.par_err.astype(np.float64)
+        enter = np.searchsorted(T, own, side="left")
+        leave = np.searchsorted(T, par, side="left")
+        live = enter < leave
+        tc = np.where(self.hdr_ok, self.ctc, 0)
+        cnt = np.zeros(self.E, dtype=np.int64)
+        bad = self.bad_edges(cnt)
+        nbad = int(bad.sum())
+        order_in = np.argsort(enter, kind="stable")
+        order_out = np.argsort(leave, kind="stable")
+        ein = enter[order_in]
+        eout = leave[order_out]
+        failures = 0
+        for i in range(T.size):
+            add = order_in[np.searchsorted(ein, i, "left"):np.searchsorted(ein, i, "right")]
+            add = add[live[add]]
+            rem = order_out[np.searchsorted(eout, i, "left"):np.searchsorted(eout, i, "right")]
+            rem = rem[live[rem]]
+            if add.size == 0 and rem.size == 0 and i > 0:
+                continue
+            ea = self.eid[np.repeat(self.tbase[add], tc[add]) + seg_arange(tc[add])].reshape(-1)
+            er = self.eid[np.repeat(self.tbase[rem], tc[rem]) + seg_arange(tc[rem])].reshape(-1)
+            touched = np.unique(np.concatenate([ea, er]))
+            before = int(bad[touched].sum())
+            ua, ca = np.unique(ea, return_counts=True)
+            cnt[ua] += ca
+            ur, cr = np.unique(er, return_counts=True)
+            cnt[ur] -= cr
+            nb = np.where(self.special[touched], cnt[touched] != self.L0[touched],
+                          (cnt[touched] != 0) & (cnt[touched] != 2))
+            bad[touched] = nb
+            nbad += int(nb.sum()) - before
+            if nbad:
+                failures += 1
+                if failures <= MAX_EXAMPLES:
+                    sel = self.uniform_sel(T[i])
+                    self.r.violation("cracked_cut", self.describe_cut_failure(f"uniform cut t={fmt_f(T[i])}", sel, cnt, bad))
+                else:
+                    self.r.violations["cracked_cut"]["count"] += 1
+        # sanity: the incremental counts equal a direct count at the last threshold
+        sel = self.uniform_sel(T[-1])
+        direct = np.bincount(self.eid[self.cluster_tris_mask(sel)].reshape(-1), minlength=self.E)
+        if not np.array_equal(direct, cnt):
+            self.r.violation("checker_self_check", "incremental uniform-cut edge counts disagree with a direct count")
+        if (cnt < 0).any():
+            self.r.violation("checker_self_check", "negative edge count in the uniform sweep")
+        f = self.r.figures
+        f["uniform_cuts"] = int(T.size)
+        f["uniform_cracked"] = failures
+        top = self.uniform_sel(T[-1])
+        f["coarsest_cut_triangles"] = int(self.ctc[top].sum())
+        self._lap("uniform_cuts", t0)
+
+    def random_cameras(self):
+        rng = np.random.default_rng(self.opts.seed)
+        l0 = self.vcl.size and self.clevel[self.vcl] == 0
+        pts = self.pos[l0] if np.any(l0) else self.pos
+        lo, hi = pts.min(axis=0).astype(np.float64), pts.max(axis=0).astype(np.float64)
+        centre = (lo + hi) / 2
+        radius = float(self.gradius.max())
+        if not radius > 0:
+            radius = float(np.linalg.norm(hi - lo) / 2) or 1.0
+        cams = []
+        for _ in range(self.opts.random_cuts):
+            d = rng.normal(size=3)
+            d /= np.linalg.norm(d) or 1.0
+            eye = centre + d * radius * 10.0 ** rng.uniform(-1.3, 1.2)
+            tau = float(TAUS[int(rng.integers(len(TAUS)))])
+            cams.append((eye, tau))
+        return cams, radius
+
+    def projected(self, eye, z_near, proj11):
+        """Section 6: per-group projected error, evaluated in f32."""
+        f32 = np.float32
+        e = eye.astype(f32)
+        dx = self.gcenter[:, 0] - e[0]
+        dy = self.gcenter[:, 1] - e[1]
+        dz = self.gcenter[:, 2] - e[2]
+        d = np.sqrt(dx * dx + dy * dy + dz * dz)
+        d = np.maximum(d - self.gradius, z_near)
+        with np.errstate(over="ignore", invalid="ignore"):
+            pr = self.gerror / d * f32(VIEW_H * 0.5) * proj11
+        return np.where(self.gerror == 0, f32(0), pr).astype(f32)
+
+    def view_sel(self, eye, tau, z_near, proj11):
+        pr = self.projected(eye, z_near, proj11)
+        own_pr = np.where(self.has_own, pr[np.where(self.has_own, self.cown, 0)], np.float32(0))
+        par_pr = pr[self.cgroup]
+        tau = np.float32(tau)
+        return (own_pr <= tau) & (tau < par_pr), own_pr, par_pr
+
+    def check_random_cuts(self):
+        t0 = time.perf_counter()
+        cams, radius = self.random_cameras()
+        self.cams = cams
+        self.cam_radius = radius
+        self.z_near = np.float32(radius * 1e-3)
+        self.proj11 = np.float32(1.0 / math.tan(math.radians(FOV_Y_DEG) / 2))
+        failures = 0
+        nonmono = 0
+        sizes = []
+        for i, (eye, tau) in enumerate(cams):
+            sel, own_pr, par_pr = self.view_sel(eye, tau, self.z_near, self.proj11)
+            sizes.append(int(self.ctc[sel].sum()))
+            nm = self.has_own & (own_pr > par_pr)
+            if nm.any():
+                nonmono += 1
+                c = int(np.flatnonzero(nm)[0])
+                self.r.note("projected_not_monotone",
+                            f"camera {i} eye {np.round(eye, 6).tolist()}: {self.cl(c)} own projected error "
+                            f"{fmt_f(own_pr[c])} > parent {fmt_f(par_pr[c])} ({int(nm.sum())} clusters)")
+            if not self.check_cut(f"view cut {i} (eye {np.round(eye, 6).tolist()}, tau {tau})", sel):
+                failures += 1
+        f = self.r.figures
+        f["random_cuts"] = len(cams)
+        f["random_cracked"] = failures
+        if sizes:
+            f["random_cut_triangles"] = {"min": min(sizes), "median": int(np.median(sizes)), "max": max(sizes)}
+        self._lap("random_cuts", t0)
+
+    # -- trimesh cross-checks ------------------------------------------------
+    def cut_mesh(self, sel):
+        import trimesh
+        faces_g = self.tw[self.cluster_tris_mask(sel)]
+        used, inv = np.unique(faces_g.reshape(-1), return_inverse=True)
+        mesh = trimesh.Trimesh(vertices=self.wgrid[used], faces=inv.reshape(-1, 3), process=False, validate=False)
+        return mesh, used
+
+    def boundary_keys_trimesh(self, mesh, used):
+        import trimesh
+        es = mesh.edges_sorted
+        rows = trimesh.grouping.group_rows(es, require_count=1)
+        g = used[es[rows]]
+        lo = np.minimum(g[:, 0], g[:, 1])
+        hi = np.maximum(g[:, 0], g[:, 1])
+        return np.unique(lo * self.NW + hi)
+
+    def topology_of(self, mesh):
+        import trimesh  # noqa: F401
+        return {"watertight": bool(mesh.is_watertight), "euler": int(mesh.euler_number),
+                "bodies": int(mesh.body_count), "winding_consistent": bool(mesh.is_winding_consistent)}
+
+    def trimesh_checks(self):
+        t0 = time.perf_counter()
+        r = self.r
+        level0 = self.clevel == 0
+        mesh0, used0 = self.cut_mesh(level0 & self.hdr_ok)
+        self.mesh0 = mesh0
+        src = self.topology_of(mesh0)
+        src_boundary = self.boundary_keys_trimesh(mesh0, used0)
+        own_boundary = self.ekeys[self.L0 == 1]
+        if not np.array_equal(src_boundary, own_boundary):
+            r.violation("checker_self_check", f"level 0: trimesh finds {src_boundary.size} boundary edges, "
+                                              f"edge counting finds {own_boundary.size}")
+        r.figures["level0_topology"] = src
+        # which cuts: every uniform cut up to --trimesh-uniform, else evenly spaced
+        T = self.T
+        k = self.opts.trimesh_uniform
+        if k <= 0 or T.size <= k:
+            uni = list(range(T.size))
+        else:
+            uni = sorted(set(np.linspace(0, T.size - 1, k).round().astype(int).tolist()))
+        cuts = [(f"uniform cut t={fmt_f(T[i])}", self.uniform_sel(T[i])) for i in uni]
+        nr = min(self.opts.trimesh_random, len(self.cams))
+        for i in range(nr):
+            eye, tau = self.cams[i]
+            cuts.append((f"view cut {i}", self.view_sel(eye, tau, self.z_near, self.proj11)[0]))
+        euler_info = 0
+        rows = []
+        for name, sel in cuts:
+            if not sel.any():
+                r.violation("empty_cut", f"{name}: selects no cluster")
+                continue
+            mesh, used = self.cut_mesh(sel)
+            top = self.topology_of(mesh)
+            bk = self.boundary_keys_trimesh(mesh, used)
+            if not np.array_equal(bk, src_boundary):
+                missing = np.setdiff1d(src_boundary, bk)
+                extra = np.setdiff1d(bk, src_boundary)
+                ex = missing[0] if missing.size else extra[0]
+                a, b = divmod(int(ex), self.NW)
+                r.violation("trimesh_boundary",
+                            f"{name}: boundary edges differ from level 0 ({missing.size} missing, {extra.size} extra), "
+                            f"e.g. edge {self.wq[a].tolist()}-{self.wq[b].tolist()}")
+            # cross-check: trimesh boundary == own count of this cut's edges used once
+            cnt = np.bincount(self.eid[self.cluster_tris_mask(sel)].reshape(-1), minlength=self.E)
+            if not np.array_equal(bk, self.ekeys[cnt == 1]):
+                r.violation("checker_self_check", f"{name}: trimesh and edge counting disagree on boundary edges")
+            if top["watertight"] != src["watertight"]:
+                r.violation("trimesh_watertight", f"{name}: is_watertight {top['watertight']}, level 0 {src['watertight']}")
+            if top["bodies"] == src["bodies"]:
+                if top["euler"] != src["euler"]:
+                    r.violation("trimesh_euler", f"{name}: Euler characteristic {top['euler']} != level 0 {src['euler']} "
+                                                 f"with the same {top['bodies']} components")
+            else:
+                euler_info += 1
+                r.note("components_changed", f"{name}: {top['bodies']} components (level 0: {src['bodies']}), "
+                                             f"Euler {top['euler']} (level 0: {src['euler']})")
+            if top["winding_consistent"] != src["winding_consistent"]:
+                r.note("winding_changed", f"{name}: winding consistent {top['winding_consistent']}, level 0 "
+                                          f"{src['winding_consistent']}")
+            rows.append(top)
+        r.figures["trimesh_cuts"] = len(cuts)
+        self._lap("trimesh", t0)
+
+    # -- distances -----------------------------------------------------------
+    def distances(self):
+        import trimesh
+        t0 = time.perf_counter()
+        n = self.opts.distance_samples
+        if n <= 0:
+            return
+        errs = np.unique(self.gerror[np.isfinite(self.gerror) & (self.gerror > 0)].astype(np.float64))
+        out = []
+        if errs.size:
+            q0 = trimesh.proximity.ProximityQuery(self.mesh0)
+            pts0 = trimesh.sample.sample_surface(self.mesh0, n, seed=self.opts.seed)[0]
+            for frac in (0.25, 0.5, 0.75):
+                t = float(errs[int(round(frac * (errs.size - 1)))])
+                mesh, _ = self.cut_mesh(self.uniform_sel(t))
+                pts = trimesh.sample.sample_surface(mesh, n, seed=self.opts.seed + 1)[0]
+                step = float(self.step)
+                d_cut = q0.on_surface(pts)[1] * step                     # cut -> level 0
+                d_l0 = trimesh.proximity.ProximityQuery(mesh).on_surface(pts0)[1] * step  # level 0 -> cut
+                out.append({
+                    "fraction": frac, "t": t, "cut_triangles": int(len(mesh.faces)),
+                    "cut_to_level0": {"max": float(d_cut.max()), "mean": float(d_cut.mean()),
+                                      "max_ratio": float(d_cut.max() / t), "mean_ratio": float(d_cut.mean() / t)},
+                    "level0_to_cut": {"max": float(d_l0.max()), "mean": float(d_l0.mean()),
+                                      "max_ratio": float(d_l0.max() / t), "mean_ratio": float(d_l0.mean() / t)},
+                })
+        self.r.figures["distances"] = out
+        if self.opts.source:
+            self.source_distance(trimesh)
+        self._lap("distances", t0)
+
+    def source_distance(self, trimesh):
+        n = self.opts.distance_samples
+        try:
+            src = trimesh.load(self.opts.source, force="mesh", process=False)
+        except Exception as exc:  # noqa: BLE001 - any loader failure is reported
+            self.r.note("source_load", f"cannot load {self.opts.source}: {exc}")
+            return
+        step = float(self.step)
+        # into grid units, like the level-0 mesh (see build_topology)
+        verts = (np.asarray(src.vertices, dtype=np.float64) - self.origin.astype(np.float64)) / step - self.qcentre
+        src = trimesh.Trimesh(vertices=verts, faces=src.faces, process=False, validate=False)
+        pts_src = trimesh.sample.sample_surface(src, n, seed=self.opts.seed + 2)[0]
+        pts_l0 = trimesh.sample.sample_surface(self.mesh0, n, seed=self.opts.seed + 3)[0]
+        d1 = trimesh.proximity.ProximityQuery(src).on_surface(pts_l0)[1] * step
+        d2 = trimesh.proximity.ProximityQuery(self.mesh0).on_surface(pts_src)[1] * step
+        self.r.figures["source_distance"] = {
+            "source": self.opts.source, "source_triangles": int(len(src.faces)), "grid_step": step,
+            "level0_to_source": {"max": float(d1.max()), "mean": float(d1.mean()), "max_steps": float(d1.max() / step)},
+            "source_to_level0": {"max": float(d2.max()), "mean": float(d2.mean()), "max_steps": float(d2.max() / step)},
+        }
+
+    # -- driver ----------------------------------------------------------------
+    def run(self):
+        t = time.perf_counter()
+        self.read_header()
+        self.read_tables()
+        self.check_groups()
+        self.check_clusters()
+        self.check_pages()
+        self.check_dependencies()
+        self.invariants_done = False
+        self.check_invariants()
+        self._lap("tables", t)
+        self.decode_pages()
+        self.check_cluster_headers()
+        self.decode_clusters()
+        f = self.r.figures
+        f["bytes"] = len(self.data)
+        f["pages"] = self.P
+        f["groups"] = self.G
+        f["clusters"] = self.C
+        f["flags"] = [n for b, n in ((FLAG_NORMALS, "normals"), (FLAG_UVS, "uvs"), (FLAG_MATERIALS, "materials"))
+                      if self.flags & b]
+        f["grid_step"] = float(self.step)
+        f["source_triangles"] = int(self.source_triangles)
+        if not (self.complete and self.invariants_done):
+            self.r.note("cuts_skipped", "cut, trimesh and distance checks skipped: not every cluster decoded cleanly")
+            return
+        self.build_topology()
+        self.check_uniform_cuts()
+        self.check_random_cuts()
+        if not self.opts.no_trimesh:
+            self.trimesh_checks()
+            self.distances()
+
+
+def check_path(path, opts):
+    report = Report(path)
+    t = time.perf_counter()
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        report.io_error = str(exc)
+        return report
+    checker = Checker(path, memoryview(data), opts, report)
+    try:
+        checker.run()
+    except Fatal:
+        pass
+    except Exception as exc:  # noqa: BLE001 - never a traceback on a bad file
+        report.violation("checker_error", f"unexpected {type(exc).__name__} while checking: {exc} "
+                                          "(the file is malformed in a way not anticipated, or this is a checker bug)")
+        if opts.debug:
+            raise
+    report.figures["timings"] = checker.timings
+    report.figures["seconds"] = round(time.perf_counter() - t, 3)
+    return report
+
+
+def print_report(rep, out):
+    f = rep.figures
+    if rep.io_error:
+        print(f"{rep.path}: ERROR cannot read: {rep.io_error}", file=out)
+        return
+    status = "PASS" if rep.ok else f"FAIL ({rep.violation_count} violations of {len(rep.violations)} kinds)"
+    head = [f"{rep.path}: {status}"]
+    for k in ("levels", "groups", "clusters", "pages", "root_groups"):
+        if k in f:
+            head.append(f"{k}={f[k]}")
+    if "level0_fill" in f:
+        head.append(f"level0_fill={f['level0_fill']:.2f}")
+    for k in ("uniform_cuts", "random_cuts", "trimesh_cuts"):
+        if k in f:
+            head.append(f"{k}={f[k]}")
+    head.append(f"({f.get('seconds', 0):.2f} s)")
+    print(" ".join(head), file=out)
+    if "per_level" in f:
+        print("  per level: " + "; ".join(f"L{x['level']} {x['clusters']}c/{x['groups']}g/{x['triangles']}t"
+                                          for x in f["per_level"]), file=out)
+    for kind, v in sorted(rep.violations.items()):
+        print(f"  VIOLATION [{kind}] x{v['count']}", file=out)
+        for e in v["examples"]:
+            print(f"    - {e}", file=out)
+    for kind, v in sorted(rep.notes.items()):
+        print(f"  note [{kind}] x{v['count']}: {v['examples'][0] if v['examples'] else ''}", file=out)
+    for d in f.get("distances", []):
+        print(f"  distance at t={d['t']:.4g} ({d['cut_triangles']} tris): cut->L0 max {d['cut_to_level0']['max_ratio']:.3f}t "
+              f"mean {d['cut_to_level0']['mean_ratio']:.3f}t; L0->cut max {d['level0_to_cut']['max_ratio']:.3f}t "
+              f"mean {d['level0_to_cut']['mean_ratio']:.3f}t", file=out)
+    if "source_distance" in f:
+        s = f["source_distance"]
+        print(f"  source distance (grid_step {s['grid_step']:.4g}): L0->source max {s['level0_to_source']['max']:.4g} "
+              f"({s['level0_to_source']['max_steps']:.2f} steps) mean {s['level0_to_source']['mean']:.4g}; "
+              f"source->L0 max {s['source_to_level0']['max']:.4g} ({s['source_to_level0']['max_steps']:.2f} steps) "
+              f"mean {s['source_to_level0']['mean']:.4g}", file=out)
+
+
+def to_json(rep):
+    obj = {"file": rep.path, "ok": rep.ok}
+    if rep.io_error:
+        obj["io_error"] = rep.io_error
+    obj.update(rep.figures)
+    obj["violation_count"] = rep.violation_count
+    obj["violations"] = [{"kind": k, **v} for k, v in sorted(rep.violations.items())]
+    obj["notes"] = [{"kind": k, **v} for k, v in sorted(rep.notes.items())]
+    return obj
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description="Independent checker for .mres files (docs/FORMAT.md).")
+    ap.add_argument("files", nargs="+", metavar="FILE.mres")
+    ap.add_argument("--source", help="original mesh (OBJ/glTF) to measure the level-0 surface against")
+    ap.add_argument("--random-cuts", type=int, default=200, help="random view-dependent cuts (default 200)")
+    ap.add_argument("--seed", type=int, default=1, help="seed of cameras and surface samples (default 1)")
+    ap.add_argument("--json", action="store_true", help="print one JSON object per file (JSON Lines)")
+    ap.add_argument("--distance-samples", type=int, default=2000,
+                    help="surface samples per side for distance measurements (default 2000; 0 disables)")
+    ap.add_argument("--trimesh-uniform", type=int, default=24,
+                    help="uniform cuts cross-checked with trimesh: all if there are at most this many, "
+                         "else this many evenly spaced (0 = all; default 24)")
+    ap.add_argument("--trimesh-random", type=int, default=20,
+                    help="random view cuts cross-checked with trimesh (default 20)")
+    ap.add_argument("--no-trimesh", action="store_true", help="skip trimesh cross-checks and distances")
+    ap.add_argument("--debug", action="store_true", help="re-raise unexpected exceptions")
+    opts = ap.parse_args(argv)
+    if opts.random_cuts < 0 or opts.distance_samples < 0:
+        ap.error("counts must be >= 0")
+    if opts.source and len(opts.files) != 1:
+        ap.error("--source needs exactly one FILE")
+    status = 0
+    for path in opts.files:
+        rep = check_path(path, opts)
+        if opts.json:
+            print(json.dumps(to_json(rep)), flush=True)
+        else:
+            print_report(rep, sys.stdout)
+            sys.stdout.flush()
+        if rep.io_error:
+            status = 2
+        elif not rep.ok and status == 0:
+            status = 1
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())
