@@ -100,6 +100,7 @@ class Report:
     def __init__(self, path):
         self.path = path
         self.violations = {}
+        self.warnings = {}
         self.notes = {}
         self.figures = {}
         self.io_error = None
@@ -114,6 +115,10 @@ class Report:
 
     def violation(self, kind, msg, count=1):
         self._add(self.violations, kind, count, [msg])
+
+    def warn(self, kind, msg, count=1):
+        """Suspicious but not forbidden by the spec (e.g. topology changes)."""
+        self._add(self.warnings, kind, count, [msg])
 
     def note(self, kind, msg, count=1):
         self._add(self.notes, kind, count, [msg])
@@ -420,7 +425,7 @@ class Checker:
                            lambda p: f"page {p}: offset {int(self.poff[p])} lies before the page data ({self.pt_end})")
         past = end > n
         r.violations_where("page_bytes", past,
-                           lambda p: f"page {p}: bytes {int(self.poff[p])}..{int(self.poff[p]) + self.pcsize[p]} "
+                           lambda p: f"page {p}: bytes {int(self.poff[p])}..{int(self.poff[p]) + int(self.pcsize[p])} "
                                      f"lie outside the file ({n} bytes; truncated?)")
         big = self.prsize > MAX_RAW_SIZE
         r.violations_where("page_raw_size", big, lambda p: f"page {p}: raw_size {self.prsize[p]} > 16 MiB")
@@ -937,11 +942,14 @@ class Checker:
     def describe_cut_failure(self, name, sel, cnt, bad):
         bad_idx = np.flatnonzero(bad)
         e = int(bad_idx[0])
-        tris = np.flatnonzero(np.repeat(sel, np.where(self.hdr_ok, self.ctc, 0)) & (self.eid == e).any(axis=1))
-        cls = sorted(set(self.tcl[tris].tolist()))
-        where = ", ".join(self.cl(c) for c in cls[:4]) or "no selected cluster"
+        has_e = (self.eid == e).any(axis=1)
+        in_cut = sorted(set(self.tcl[has_e & self.cluster_tris_mask(sel)].tolist()))
+        in_l0 = sorted(set(self.tcl[has_e & self.tri_l0].tolist()))
+        where = ", ".join(self.cl(c) for c in in_cut[:4]) or "none"
+        where0 = ", ".join(self.cl(c) for c in in_l0[:4]) or "none"
         return (f"{name}: {bad_idx.size} edges with wrong use count, e.g. {self.edge_desc(e)} used {cnt[e]} times "
-                f"(level 0: {self.L0[e]}; must be {self.L0[e] if self.special[e] else '0 or 2'}) in {where}")
+                f"(level 0: {self.L0[e]}; must be {self.L0[e] if self.special[e] else '0 or 2'}); "
+                f"cut clusters using it: {where}; level-0 clusters using it: {where0}")
 
     def cluster_tris_mask(self, sel):
         return np.repeat(sel, np.where(self.hdr_ok, self.ctc, 0))
@@ -1044,6 +1052,11 @@ class Checker:
         """Section 6: per-group projected error, evaluated in f32."""
         f32 = np.float32
         e = eye.astype(f32)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._projected(e, z_near, proj11)
+
+    def _projected(self, e, z_near, proj11):
+        f32 = np.float32
         dx = self.gcenter[:, 0] - e[0]
         dy = self.gcenter[:, 1] - e[1]
         dz = self.gcenter[:, 2] - e[2]
@@ -1075,9 +1088,11 @@ class Checker:
             sizes.append(int(self.ctc[sel].sum()))
             nm = self.has_own & (own_pr > par_pr)
             if nm.any():
+                # some threshold between the two values would draw both a cluster's
+                # parents and its children: section 6 promises crack-free cuts for any tau
                 nonmono += 1
                 c = int(np.flatnonzero(nm)[0])
-                self.r.note("projected_not_monotone",
+                self.r.violation("projected_not_monotone",
                             f"camera {i} eye {np.round(eye, 6).tolist()}: {self.cl(c)} own projected error "
                             f"{fmt_f(own_pr[c])} > parent {fmt_f(par_pr[c])} ({int(nm.sum())} clusters)")
             if not self.check_cut(f"view cut {i} (eye {np.round(eye, 6).tolist()}, tau {tau})", sel):
@@ -1111,6 +1126,37 @@ class Checker:
         return {"watertight": bool(mesh.is_watertight), "euler": int(mesh.euler_number),
                 "bodies": int(mesh.body_count), "winding_consistent": bool(mesh.is_winding_consistent)}
 
+    @staticmethod
+    def pinch_stats(mesh):
+        """Non-manifold ("pinch") vertices: vertices whose incident triangles form
+        more than one edge-connected fan; and the Euler characteristic after
+        splitting them (what a manifold surface with the same faces would have)."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        nv = int(faces.max()) + 1 if faces.size else 0
+        v = faces.reshape(-1)
+        b = faces[:, [1, 2, 0]].reshape(-1)
+        c = faces[:, [2, 0, 1]].reshape(-1)
+        keys = np.concatenate([v * nv + b, v * nv + c])
+        uk, inv = np.unique(keys, return_inverse=True)
+        n = v.size
+        g = coo_matrix((np.ones(n, dtype=np.int8), (inv[:n], inv[n:])), shape=(uk.size, uk.size))
+        ncomp, labels = connected_components(g, directed=False)
+        fan_keys = np.unique((uk // nv) * ncomp + labels)
+        fans = np.bincount(fan_keys // ncomp, minlength=nv)
+        extra = int((fans[fans > 1] - 1).sum())
+        # edge-connected components of faces (faces sharing an edge)
+        fe = np.sort(np.stack([faces, faces[:, [1, 2, 0]]], axis=2).reshape(-1, 2), axis=1)
+        ek, einv = np.unique(fe[:, 0] * nv + fe[:, 1], return_inverse=True)
+        fidx = np.repeat(np.arange(len(faces)), 3)
+        # bipartite graph faces <-> edges
+        m = len(faces)
+        g2 = coo_matrix((np.ones(fidx.size, dtype=np.int8), (fidx, m + einv)), shape=(m + ek.size, m + ek.size))
+        fcomp = connected_components(g2, directed=False)[0]
+        return {"pinch_vertices": int((fans > 1).sum()), "euler_split": int(mesh.euler_number) + extra,
+                "face_components": int(fcomp)}
+
     def trimesh_checks(self):
         t0 = time.perf_counter()
         r = self.r
@@ -1123,6 +1169,8 @@ class Checker:
         if not np.array_equal(src_boundary, own_boundary):
             r.violation("checker_self_check", f"level 0: trimesh finds {src_boundary.size} boundary edges, "
                                               f"edge counting finds {own_boundary.size}")
+        src0 = self.pinch_stats(mesh0)
+        src.update(src0)
         r.figures["level0_topology"] = src
         # which cuts: every uniform cut up to --trimesh-uniform, else evenly spaced
         T = self.T
@@ -1161,8 +1209,16 @@ class Checker:
                 r.violation("trimesh_watertight", f"{name}: is_watertight {top['watertight']}, level 0 {src['watertight']}")
             if top["bodies"] == src["bodies"]:
                 if top["euler"] != src["euler"]:
-                    r.violation("trimesh_euler", f"{name}: Euler characteristic {top['euler']} != level 0 {src['euler']} "
-                                                 f"with the same {top['bodies']} components")
+                    ex = self.pinch_stats(mesh)
+                    msg = (f"{name}: Euler characteristic {top['euler']} != level 0 {src['euler']} with the same "
+                           f"{top['bodies']} components ({ex['pinch_vertices']} non-manifold (pinch) vertices, "
+                           f"Euler {ex['euler_split']} after splitting them, {ex['face_components']} edge-connected "
+                           f"components; level 0: {src0['pinch_vertices']} pinch vertices, {src0['face_components']} "
+                           "edge-connected components)")
+                    if self.opts.strict_topology:
+                        r.violation("trimesh_euler", msg)
+                    else:
+                        r.warn("euler_changed", msg)
             else:
                 euler_info += 1
                 r.note("components_changed", f"{name}: {top['bodies']} components (level 0: {src['bodies']}), "
@@ -1309,6 +1365,10 @@ def print_report(rep, out):
         print(f"  VIOLATION [{kind}] x{v['count']}", file=out)
         for e in v["examples"]:
             print(f"    - {e}", file=out)
+    for kind, v in sorted(rep.warnings.items()):
+        print(f"  WARNING [{kind}] x{v['count']}", file=out)
+        for e in v["examples"]:
+            print(f"    - {e}", file=out)
     for kind, v in sorted(rep.notes.items()):
         print(f"  note [{kind}] x{v['count']}: {v['examples'][0] if v['examples'] else ''}", file=out)
     for d in f.get("distances", []):
@@ -1330,6 +1390,7 @@ def to_json(rep):
     obj.update(rep.figures)
     obj["violation_count"] = rep.violation_count
     obj["violations"] = [{"kind": k, **v} for k, v in sorted(rep.violations.items())]
+    obj["warnings"] = [{"kind": k, **v} for k, v in sorted(rep.warnings.items())]
     obj["notes"] = [{"kind": k, **v} for k, v in sorted(rep.notes.items())]
     return obj
 
@@ -1348,6 +1409,9 @@ def main(argv=None):
                          "else this many evenly spaced (0 = all; default 24)")
     ap.add_argument("--trimesh-random", type=int, default=20,
                     help="random view cuts cross-checked with trimesh (default 20)")
+    ap.add_argument("--strict-topology", action="store_true",
+                    help="a cut whose Euler characteristic differs from level 0 with the same number of components is "
+                         "a violation (default: a warning; the spec only promises edge multiplicities)")
     ap.add_argument("--no-trimesh", action="store_true", help="skip trimesh cross-checks and distances")
     ap.add_argument("--debug", action="store_true", help="re-raise unexpected exceptions")
     opts = ap.parse_args(argv)

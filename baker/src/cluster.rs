@@ -1,17 +1,20 @@
 //! Cluster: split a triangle list into clusters of at most `max_triangles` triangles and
 //! `max_vertices` vertices with meshopt's meshlet builder, and bound them.
 //!
-//! Level 0 uses `meshopt_buildMeshletsSpatial` (SAH-driven, fill-weighted): measured on the
-//! Stanford dragon it fills level-0 clusters to 125+ of 128 triangles where the greedy
-//! `meshopt_buildMeshlets` reaches ~118 (see docs/BENCHMARKS.md).
+//! Clusters come from `meshopt_buildMeshletsSpatial` (SAH-driven). Level 0 asks for full
+//! clusters (min = max = 128 triangles): measured on the Stanford dragon and the 1,600-box
+//! scene, that fills level 0 to 128.0 where the default minimum (32) gives 123.5 and 96.0 and
+//! the greedy `meshopt_buildMeshlets` gives 128.0 with 1–40% larger files (docs/BENCHMARKS.md).
+//! Higher levels keep the smaller minimum, which gives tighter clusters.
 
 use crate::settings::BakeSettings;
 use formats::mres::Sphere;
 use meshopt::VertexDataAdapter;
 
-/// Splits `indices` (a triangle list into `positions`) into clusters; each returned cluster
-/// is a triangle list into the same vertex array.
-pub fn split(indices: &[u32], positions: &[[f32; 3]], settings: &BakeSettings) -> Vec<Vec<u32>> {
+/// Splits `indices` (a triangle list into `positions`) into clusters of `min_triangles` (a
+/// multiple of 4) to `settings.max_triangles` triangles, except the last; each returned
+/// cluster is a triangle list into the same vertex array.
+pub fn split(indices: &[u32], positions: &[[f32; 3]], min_triangles: usize, settings: &BakeSettings) -> Vec<Vec<u32>> {
     if indices.is_empty() {
         return Vec::new();
     }
@@ -20,13 +23,8 @@ pub fn split(indices: &[u32], positions: &[[f32; 3]], settings: &BakeSettings) -
         return Vec::new();
     };
     let max_t = settings.max_triangles as usize;
-    let meshlets = match std::env::var("MRES_BUILDER").as_deref() {
-        Ok("greedy") => meshopt::build_meshlets(indices, &adapter, settings.max_vertices as usize, max_t, 0.0),
-        Ok("flex") => {
-            meshopt::build_meshlets_flex(indices, &adapter, settings.max_vertices as usize, max_t / 2, max_t, 0.0, 0.0)
-        }
-        _ => meshopt::build_meshlets_spatial(indices, &adapter, settings.max_vertices as usize, max_t / 4, max_t, 0.5),
-    };
+    let max_vertices = settings.max_vertices as usize;
+    let meshlets = meshopt::build_meshlets_spatial(indices, &adapter, max_vertices, min_triangles, max_t, 0.5);
     meshlets.iter().map(|m| m.triangles.iter().map(|&t| m.vertices[t as usize]).collect()).collect()
 }
 

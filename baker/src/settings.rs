@@ -40,8 +40,8 @@ impl Default for BakeSettings {
         BakeSettings {
             // Fine enough for scans at 1:65535, and keeps per-cluster packed positions short.
             position_bits: 16,
-            // 12 bits: < 0.05° mean normal error, 3 bytes per vertex.
-            normal_bits: 12,
+            // 10 bits per octahedral coordinate: ≈ 0.1° mean normal error, at most 2.5 bytes per vertex.
+            normal_bits: 10,
             // Nanite's cluster size; the mesh-shader limits are 256 vertices / 256 primitives.
             max_triangles: 128,
             max_vertices: 255,
