@@ -71,14 +71,16 @@ pub fn bake_mesh(mesh: SourceMesh, settings: &BakeSettings) -> Result<Baked, Bak
     settings.check().map_err(BakeError::Settings)?;
     let start = Instant::now();
     let welded = weld(&mesh, settings);
+    let weld_seconds = start.elapsed().as_secs_f64();
     let source_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
     drop(mesh);
     let welded = match welded {
         Some(w) if !w.indices.is_empty() => w,
         _ => return Err(BakeError::Empty(source_triangles)),
     };
-    let (dag, build) = build_dag(&welded, settings);
-    let stats = BakeStats {
+    let (dag, mut build) = build_dag(&welded, settings);
+    build.stage_seconds.insert(0, ("weld".into(), weld_seconds));
+    let mut stats = BakeStats {
         source_triangles,
         degenerate_dropped: welded.degenerate_dropped,
         welded_vertices: welded.positions.len() as u64,
@@ -88,7 +90,9 @@ pub fn bake_mesh(mesh: SourceMesh, settings: &BakeSettings) -> Result<Baked, Bak
         ..Default::default()
     };
     drop(welded);
+    let write_start = Instant::now();
     let bytes = formats::mres::write_mres(&dag, settings.zstd_level)?;
+    stats.build.stage_seconds.push(("write".into(), write_start.elapsed().as_secs_f64()));
     Ok(Baked {
         stats: BakeStats { bytes: bytes.len() as u64, build_seconds: start.elapsed().as_secs_f64(), ..stats },
         bytes,

@@ -47,11 +47,18 @@ pub struct BuildStats {
     pub root_groups: u64,
     /// Clusters in the root group(s).
     pub root_clusters: u64,
+    /// Wall seconds per stage: level-0 clusters, all simplification levels, encoding.
+    pub stage_seconds: Vec<(String, f64)>,
 }
 
 /// Builds the cluster DAG of a welded mesh.
 pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats) {
     let mut stats = BuildStats::default();
+    let mut clock = std::time::Instant::now();
+    let mut lap = |stats: &mut BuildStats, stage: &str| {
+        stats.stage_seconds.push((stage.to_string(), clock.elapsed().as_secs_f64()));
+        clock = std::time::Instant::now();
+    };
     let mut clusters: Vec<Cluster> = level0_clusters(mesh, settings)
         .into_par_iter()
         .map(|indices| {
@@ -60,6 +67,7 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
         })
         .collect();
     let (always_locked, special) = open_and_nonmanifold(mesh);
+    lap(&mut stats, "level 0");
     let mut groups: Vec<Group> = Vec::new();
     let mut pending: Vec<usize> = (0..clusters.len()).collect();
     let mut level = 0u32;
@@ -160,7 +168,10 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
             clusters[c].group = id;
         }
     }
-    (to_dag(mesh, settings, groups, clusters), stats)
+    lap(&mut stats, "levels");
+    let dag = to_dag(mesh, settings, groups, clusters);
+    lap(&mut stats, "encode");
+    (dag, stats)
 }
 
 /// Triangles per chunk of the level-0 split: chunks are clustered in parallel.

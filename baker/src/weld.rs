@@ -5,7 +5,7 @@
 use crate::settings::BakeSettings;
 use formats::mres::{Grid, UvQuant};
 use formats::SourceMesh;
-use rustc_hash::FxHashMap as HashMap;
+use rayon::prelude::*;
 
 /// A welded, quantized mesh: the input of the DAG build.
 pub struct WeldedMesh {
@@ -46,6 +46,36 @@ pub fn weld(mesh: &SourceMesh, settings: &BakeSettings) -> Option<WeldedMesh> {
     let uvs = mesh.uvs.as_ref().filter(|_| settings.keep_uvs);
     let uv = uv_quant(uvs.map(|v| v.as_slice()).unwrap_or(&[]));
 
+    // Welding units: source vertices, or (source vertex, material) pairs when a vertex can be
+    // used by triangles of several materials (a vertex never spans two materials).
+    let first_material = mesh.materials.first().copied().unwrap_or(0);
+    let multi_material = mesh.materials.par_iter().any(|&m| m != first_material);
+    let units: Vec<(u32, u32)> = if multi_material {
+        let mut corners: Vec<(u32, u32)> =
+            mesh.indices.par_iter().enumerate().map(|(i, &v)| (v, mesh.materials[i / 3])).collect();
+        corners.par_sort_unstable();
+        corners.dedup();
+        corners
+    } else {
+        (0..mesh.positions.len() as u32).map(|v| (v, first_material)).collect()
+    };
+    // Key: grid point, quantized attributes, material. Attributes are compared after
+    // quantization so that vertices that encode identically also weld. Sorting by key (ties
+    // by unit) makes the numbering deterministic and puts equal grid points next to each other.
+    type Key = ([i32; 3], [u32; 2], [u16; 2], u32);
+    let mut keyed: Vec<(Key, u32)> = units
+        .par_iter()
+        .enumerate()
+        .map(|(i, &(src, material))| {
+            let s = src as usize;
+            let q = grid.quantize(mesh.positions[s]);
+            let n = normals.map(|n| formats::mres::bits::oct_encode(n[s], settings.normal_bits)).unwrap_or([0; 2]);
+            let t = uvs.map(|u| uv.quantize(u[s])).unwrap_or([0; 2]);
+            ((q, n, t, material), i as u32)
+        })
+        .collect();
+    keyed.par_sort_unstable();
+
     let mut out = WeldedMesh {
         grid,
         uv,
@@ -56,62 +86,56 @@ pub fn weld(mesh: &SourceMesh, settings: &BakeSettings) -> Option<WeldedMesh> {
         normals: normals.map(|_| Vec::new()),
         uvs: uvs.map(|_| Vec::new()),
         materials: Vec::new(),
-        multi_material: false,
-        indices: Vec::with_capacity(mesh.indices.len()),
+        multi_material,
+        indices: Vec::new(),
         degenerate_dropped: mesh.degenerate_dropped,
         source_triangles: mesh.triangle_count() as u64 + mesh.degenerate_dropped,
     };
-    // Key: grid point, quantized attributes, material. Attributes are compared after
-    // quantization so that vertices that encode identically also weld.
-    let mut vertex_of: HashMap<([i32; 3], [u32; 2], [u16; 2], u32), u32> = HashMap::default();
-    let mut position_of: HashMap<[i32; 3], u32> = HashMap::default();
-    // Source vertex → welded vertex for the material it was first seen with; the rare
-    // vertices shared by several materials go through `vertex_of` each time.
-    let mut source_to_vertex: Vec<(u32, u32)> = vec![(u32::MAX, 0); mesh.positions.len()];
-    let first_material = mesh.materials.first().copied().unwrap_or(0);
-    for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
-        let material = mesh.materials.get(t).copied().unwrap_or(0);
-        out.multi_material |= material != first_material;
-        let mut welded = [0u32; 3];
-        for (k, &src) in tri.iter().enumerate() {
-            let s = src as usize;
-            if source_to_vertex[s].0 == material {
-                welded[k] = source_to_vertex[s].1;
-                continue;
-            }
-            welded[k] = {
-                let q = grid.quantize(mesh.positions[s]);
-                let n = normals.map(|n| formats::mres::bits::oct_encode(n[s], settings.normal_bits)).unwrap_or([0; 2]);
-                let t = uvs.map(|u| uv.quantize(u[s])).unwrap_or([0; 2]);
-                let next = out.grid_positions.len() as u32;
-                *vertex_of.entry((q, n, t, material)).or_insert_with(|| {
-                    let fresh = position_of.len() as u32;
-                    let pid = *position_of.entry(q).or_insert(fresh);
-                    out.grid_positions.push(q);
-                    out.positions.push(grid.decode(q));
-                    out.position_ids.push(pid);
-                    if let (Some(dst), Some(src)) = (out.normals.as_mut(), normals) {
-                        dst.push(src[s]);
-                    }
-                    if let (Some(dst), Some(src)) = (out.uvs.as_mut(), uvs) {
-                        dst.push(src[s]);
-                    }
-                    out.materials.push(material);
-                    next
-                })
-            };
-            if source_to_vertex[s].0 == u32::MAX {
-                source_to_vertex[s] = (material, welded[k]);
-            }
+    let mut unit_vertex = vec![0u32; units.len()];
+    let mut previous_q = None;
+    for run in keyed.chunk_by(|a, b| a.0 == b.0) {
+        let ((q, _, _, material), first) = run[0];
+        let s = units[first as usize].0 as usize;
+        let vertex = out.grid_positions.len() as u32;
+        if previous_q != Some(q) {
+            out.position_count += 1;
+            previous_q = Some(q);
         }
-        let p = welded.map(|v| out.position_ids[v as usize]);
-        if p[0] == p[1] || p[1] == p[2] || p[0] == p[2] {
-            out.degenerate_dropped += 1;
-            continue;
+        out.grid_positions.push(q);
+        out.positions.push(grid.decode(q));
+        out.position_ids.push(out.position_count as u32 - 1);
+        if let (Some(dst), Some(src)) = (out.normals.as_mut(), normals) {
+            dst.push(src[s]);
         }
-        out.indices.extend_from_slice(&welded);
+        if let (Some(dst), Some(src)) = (out.uvs.as_mut(), uvs) {
+            dst.push(src[s]);
+        }
+        out.materials.push(material);
+        for &(_, unit) in run {
+            unit_vertex[unit as usize] = vertex;
+        }
     }
-    out.position_count = position_of.len();
+    drop(keyed);
+
+    let vertex_of = |corner: usize| -> u32 {
+        let src = mesh.indices[corner];
+        if multi_material {
+            let unit = units.binary_search(&(src, mesh.materials[corner / 3])).unwrap_or(0);
+            unit_vertex[unit]
+        } else {
+            unit_vertex[src as usize]
+        }
+    };
+    let triangles: Vec<Option<[u32; 3]>> = (0..mesh.triangle_count())
+        .into_par_iter()
+        .map(|t| {
+            let welded = [vertex_of(3 * t), vertex_of(3 * t + 1), vertex_of(3 * t + 2)];
+            let p = welded.map(|v| out.position_ids[v as usize]);
+            (p[0] != p[1] && p[1] != p[2] && p[0] != p[2]).then_some(welded)
+        })
+        .collect();
+    out.indices = triangles.iter().flatten().flatten().copied().collect();
+    out.degenerate_dropped += triangles.iter().filter(|t| t.is_none()).count() as u64;
     Some(out)
 }
 
