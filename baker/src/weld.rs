@@ -179,7 +179,35 @@ mod tests {
         let w = weld(&mesh, &BakeSettings::default()).unwrap();
         assert_eq!(w.grid_positions.len(), 6);
         assert_eq!(w.position_count, 4);
-        assert_eq!(w.position_ids[1], w.position_ids[3]);
+        // Vertices share a position id exactly when they share a grid point.
+        for a in 0..6 {
+            for b in 0..6 {
+                assert_eq!(w.position_ids[a] == w.position_ids[b], w.grid_positions[a] == w.grid_positions[b]);
+            }
+        }
+        // The shared edge (1,0,0)-(0,1,0) is used by both triangles through different vertices.
+        let pos = |t: usize, k: usize| w.position_ids[w.indices[3 * t + k] as usize];
+        let edge = |t: usize| [pos(t, 0), pos(t, 1), pos(t, 2)];
+        let shared = edge(0).iter().filter(|p| edge(1).contains(p)).count();
+        assert_eq!(shared, 2);
+    }
+
+    #[test]
+    fn materials_split_vertices() {
+        let mesh = SourceMesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]],
+            indices: vec![0, 1, 2, 1, 3, 2],
+            materials: vec![0, 1],
+            ..Default::default()
+        };
+        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        assert!(w.multi_material);
+        assert_eq!(w.grid_positions.len(), 6, "the two shared vertices are split by material");
+        assert_eq!(w.position_count, 4);
+        for t in 0..2 {
+            let m: Vec<u32> = w.indices[3 * t..3 * t + 3].iter().map(|&v| w.materials[v as usize]).collect();
+            assert!(m.iter().all(|&x| x == t as u32));
+        }
     }
 
     #[test]
