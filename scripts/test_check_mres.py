@@ -302,3 +302,48 @@ def test_one_bad_file_among_good_ones_exits_1(baked):
     proc = run_checker(files["terrain"], bad, *FAST)
     assert_caught(proc, "bad_version")
     assert f"{files['terrain']}: PASS" in proc.stdout
+
+
+# --------------------------------------------------------------------------
+# unit tests of the cut rules (section 6), in-process
+# --------------------------------------------------------------------------
+
+def load_checker(path):
+    import types
+    sys.path.insert(0, str(ROOT / "scripts"))
+    import check_mres
+    opts = types.SimpleNamespace(seed=1, random_cuts=0, distance_samples=0, trimesh_uniform=2, trimesh_random=0,
+                                 no_trimesh=True, strict_topology=False, debug=True, source=None)
+    rep = check_mres.Report(str(path))
+    ch = check_mres.Checker(str(path), memoryview(Path(path).read_bytes()), opts, rep)
+    ch.run()
+    assert rep.ok, rep.violations
+    return ch, rep
+
+
+def test_edge_rule_odd_counts_and_special_edges():
+    import numpy as np
+    sys.path.insert(0, str(ROOT / "scripts"))
+    import check_mres
+    ch = check_mres.Checker.__new__(check_mres.Checker)
+    ch.L0 = np.array([2, 2, 2, 1, 3, 0, 0])
+    ch.special = (ch.L0 > 0) & (ch.L0 != 2)
+    cnt = np.array([0, 2, 4, 1, 3, 4, 0])
+    assert not ch.bad_edges(cnt).any()          # 0/2/4 on interior edges, exact on open/non-manifold
+    assert ch.pinched_edges(cnt).tolist() == [False, False, True, False, False, True, False]
+    cnt = np.array([1, 3, 2, 2, 1, 0, 5])
+    assert ch.bad_edges(cnt).tolist() == [True, True, False, True, True, False, True]
+
+
+def test_overlapping_levels_are_caught(baked):
+    import numpy as np
+    _, files = baked
+    ch, rep = load_checker(files["sphere"])
+    level0 = ch.clevel == 0
+    assert ch.check_overlap("test cut", level0)
+    # add the outputs of the group of cluster 0's parent: both levels drawn at once
+    g = ch.cgroup[np.flatnonzero(level0)[0]]
+    sel = level0 | (ch.cown == g)
+    assert not ch.check_overlap("test cut", sel)
+    assert "cut_overlap" in rep.violations
+    assert f"of group {g}" in rep.violations["cut_overlap"]["examples"][0]

@@ -50,6 +50,44 @@ pub fn sphere(n: u32) -> SourceMesh {
     SourceMesh { normals: Some(normals), ..mesh(positions, indices) }
 }
 
+/// The cube-sphere of [`sphere`] with every cube face a separate UV chart and material: the
+/// vertices along the 12 cube edges are duplicated with different UVs (attribute seams), so the
+/// mesh is watertight by position only. 12·n² triangles, 6 materials.
+pub fn seamed_sphere(n: u32) -> SourceMesh {
+    let n = n.max(1) as i32;
+    let (mut positions, mut uvs, mut indices, mut materials) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for face in 0..6 {
+        let (axis, side) = (face / 2, if face % 2 == 0 { -n } else { n });
+        let base = positions.len() as u32;
+        for a in 0..=n {
+            for b in 0..=n {
+                let mut p = [0i32; 3];
+                p[axis] = side;
+                p[(axis + 1) % 3] = -n + 2 * a;
+                p[(axis + 2) % 3] = -n + 2 * b;
+                let v = p.map(|c| c as f32 / n as f32);
+                let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                positions.push([v[0] / l, v[1] / l, v[2] / l]);
+                uvs.push([a as f32 / n as f32, b as f32 / n as f32]);
+            }
+        }
+        let at = |a: i32, b: i32| base + (a * (n + 1) + b) as u32;
+        for a in 0..n {
+            for b in 0..n {
+                let q = [at(a, b), at(a + 1, b), at(a + 1, b + 1), at(a, b + 1)];
+                if side > 0 {
+                    indices.extend_from_slice(&[q[0], q[1], q[2], q[0], q[2], q[3]]);
+                } else {
+                    indices.extend_from_slice(&[q[0], q[2], q[1], q[0], q[3], q[2]]);
+                }
+                materials.extend_from_slice(&[face as u32; 2]);
+            }
+        }
+    }
+    let normals = positions.clone();
+    SourceMesh { positions, normals: Some(normals), uvs: Some(uvs), indices, materials, degenerate_dropped: 0 }
+}
+
 /// An open height-field terrain of `n`×`n` quads (2·n² triangles) over [0, 1]², with UVs.
 pub fn terrain(n: u32) -> SourceMesh {
     let n = n.max(1);
@@ -117,5 +155,8 @@ mod tests {
         assert_eq!(sphere(10).triangle_count(), 1200);
         assert_eq!(terrain(10).triangle_count(), 200);
         assert_eq!(boxes(16, 4).triangle_count(), 16 * 192);
+        let seamed = seamed_sphere(10);
+        assert_eq!(seamed.triangle_count(), 1200);
+        assert_eq!(seamed.positions.len(), 6 * 121);
     }
 }

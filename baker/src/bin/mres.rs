@@ -83,9 +83,10 @@ enum Command {
         input: PathBuf,
     },
     /// Write a generated test mesh as OBJ: sphere N (12·N² triangles, closed), terrain N
-    /// (2·N² triangles, open), boxes N (N disconnected boxes of 192 triangles).
+    /// (2·N² triangles, open), boxes N (N disconnected boxes of 192 triangles), seamed-sphere N
+    /// (a sphere whose 6 faces are separate UV charts and materials).
     Generate {
-        /// sphere, terrain or boxes.
+        /// sphere, terrain, boxes or seamed-sphere.
         kind: String,
         /// Size parameter.
         n: u32,
@@ -201,7 +202,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 "sphere" => baker::generate::sphere(n),
                 "terrain" => baker::generate::terrain(n),
                 "boxes" => baker::generate::boxes(n, 4),
-                other => bail!("unknown kind {other} (sphere, terrain, boxes)"),
+                "seamed-sphere" => baker::generate::seamed_sphere(n),
+                other => bail!("unknown kind {other} (sphere, terrain, boxes, seamed-sphere)"),
             };
             let mut out = std::io::BufWriter::new(
                 std::fs::File::create(&output).with_context(|| format!("{}", output.display()))?,

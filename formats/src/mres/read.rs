@@ -159,6 +159,9 @@ impl MresFile {
         let page_table_offset = c.u64();
         let page_table_size = c.u64();
         let stored_checksum: [u8; 32] = head[112..144].try_into().map_err(|_| corrupt("header".into()))?;
+        if head[144..HEADER_SIZE].iter().any(|&b| b != 0) {
+            return Err(corrupt("header: reserved bytes are not zero".into()));
+        }
 
         if flags & !(FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS) != 0 {
             return Err(corrupt(format!("header: unknown flags {flags:#x}")));
