@@ -1142,6 +1142,8 @@ class Checker:
         stats = {"cuts_with_pinched_edges": 0, "max_pinched_edges": 0}
         for i, (eye, tau) in enumerate(cams):
             sel, own_pr, par_pr = self.view_sel(eye, tau, self.z_near, self.proj11)
+            # the f32 eye actually used, exactly (for `mres export --camera`)
+            eye_s = ",".join(repr(float(x)) for x in eye.astype(np.float32))
             sizes.append(int(self.ctc[sel].sum()))
             nm = self.has_own & (own_pr > par_pr)
             if nm.any():
@@ -1158,12 +1160,12 @@ class Checker:
                 n_children = int((sel2 & (self.cgroup == go)).sum())   # members of c's own group
                 n_parents = int((sel2 & (self.cown == gp)).sum())      # outputs of c's parent group
                 self.r.violation("projected_not_monotone",
-                                 f"camera {i} eye {np.round(eye, 6).tolist()}: {self.cl(c)} own group {self.cown[c]} "
+                                 f"camera {i} eye {eye_s}: {self.cl(c)} own group {self.cown[c]} "
                                  f"projects to {float(own_pr[c])!r} > parent group {self.cgroup[c]} {float(par_pr[c])!r} "
                                  f"({ulps} ulp, f32 rounding; {int(nm.sum())} clusters): at tau {bad_tau!r} the cut draws "
                                  f"{n_children} members of group {go} and {n_parents} outputs of group {gp}"
                                  f"{' (overlapping levels)' if n_children and n_parents else ''}")
-            if not self.check_cut(f"view cut {i} (eye {np.round(eye, 6).tolist()}, tau {tau})", sel, stats):
+            if not self.check_cut(f"view cut {i} (eye {eye_s}, tau {tau})", sel, stats):
                 failures += 1
         f = self.r.figures
         f["random_cuts"] = len(cams)
