@@ -5,6 +5,7 @@
 pub mod bake;
 pub mod bench;
 pub mod cluster;
+pub mod conditioning;
 pub mod config;
 pub mod dag;
 pub mod export;

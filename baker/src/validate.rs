@@ -1,5 +1,5 @@
 //! Validation of a `.mres` file: DESIGN.md invariants 1 (every cut crack-free), 2 (monotone
-//! errors, nested spheres) and 5 (format integrity), plus the DAG's shape figures.
+//! errors, nested spheres), 3 (well-conditioned DAG, in `conditioning`) and 5 (format integrity).
 //!
 //! Crack check: the original surface is the union of the level-0 clusters. Edges are welded by
 //! grid position. A cut is crack-free iff the original's open and non-manifold edges appear in
@@ -11,10 +11,42 @@
 //! edges are precomputed as (edge id, multiplicity) so that a cut costs one counter increment
 //! per distinct cluster edge.
 
+use crate::conditioning::{conditioning, Conditioning};
 use formats::mres::{select, MresError, MresFile, Sphere, NO_GROUP};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use serde::Serialize;
+
+/// Every threshold the validator enforces, in one place. Defaults and why:
+#[derive(Clone, Debug, Serialize)]
+pub struct Thresholds {
+    /// Invariant 3: levels ≤ `max_depth_factor` · log2(level-0 clusters) + `depth_slack`. Halving
+    /// per level gives a factor of 1 (clusters halve); 2 allows stuck groups and small tops.
+    pub max_depth_factor: f64,
+    /// See `max_depth_factor`.
+    pub depth_slack: f64,
+    /// Invariant 3: most clusters in a non-root group (Nanite's upper bound).
+    pub max_group_size: u32,
+    /// Invariant 3: mean edge age, in levels (Pettett's exact partitioning reached 1.05; issue
+    /// #4 accepts 1.5).
+    pub max_edge_age_mean: f64,
+    /// Invariant 3: most clusters (as a fraction of derived clusters) with the same boundary as
+    /// a child. A few occur where a small member had all its vertices locked; many would mean
+    /// borders stay put across levels.
+    pub max_same_boundary_fraction: f64,
+}
+
+impl Default for Thresholds {
+    fn default() -> Self {
+        Thresholds {
+            max_depth_factor: 2.0,
+            depth_slack: 2.0,
+            max_group_size: 32,
+            max_edge_age_mean: 1.5,
+            max_same_boundary_fraction: 0.01,
+        }
+    }
+}
 
 /// What to check.
 #[derive(Clone, Debug)]
@@ -25,11 +57,13 @@ pub struct ValidateOptions {
     pub seed: u64,
     /// Most violations listed in the report (all are counted).
     pub max_listed: usize,
+    /// The thresholds of invariants 3 and 4.
+    pub thresholds: Thresholds,
 }
 
 impl Default for ValidateOptions {
     fn default() -> Self {
-        ValidateOptions { random_cuts: 1000, seed: 1, max_listed: 20 }
+        ValidateOptions { random_cuts: 1000, seed: 1, max_listed: 20, thresholds: Thresholds::default() }
     }
 }
 
@@ -81,6 +115,10 @@ pub struct Report {
     pub violation_count: u64,
     /// The first violations, each naming the group/cluster and the broken invariant.
     pub violations: Vec<String>,
+    /// Invariant 3 figures.
+    pub conditioning: Conditioning,
+    /// The thresholds applied.
+    pub thresholds: Thresholds,
 }
 
 impl Report {
@@ -98,9 +136,11 @@ impl Report {
 }
 
 /// Edge tables of a decoded file.
-struct Edges {
+pub(crate) struct Edges {
     /// Per cluster: (edge id, uses within the cluster).
-    per_cluster: Vec<Vec<(u32, u8)>>,
+    pub(crate) per_cluster: Vec<Vec<(u32, u8)>>,
+    /// Uses of each edge in the original (level-0) mesh.
+    pub(crate) original: Vec<u32>,
     /// Expected uses of each edge in a crack-free cut: the original's count for open and
     /// non-manifold original edges, 0 (meaning "any even count") otherwise.
     expected: Vec<u8>,
@@ -187,8 +227,16 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
     let level0 = &report.per_level.first().cloned().unwrap_or_default();
     report.level0_fill = level0.triangles as f64 / level0.clusters.max(1) as f64;
 
-    // Invariant 1: cuts.
     let edges = edge_tables(file, &decoded);
+    // Invariant 3.
+    let (shape, problems) = conditioning(file, &decoded, &edges, &options.thresholds);
+    report.conditioning = shape;
+    report.thresholds = options.thresholds.clone();
+    for p in problems {
+        report.violation(max, || p);
+    }
+
+    // Invariant 1: cuts.
     let mut thresholds: Vec<f32> = groups.iter().map(|g| g.error).filter(|e| e.is_finite()).collect();
     thresholds.push(0.0);
     thresholds.sort_by(f32::total_cmp);
@@ -282,7 +330,7 @@ fn edge_tables(file: &MresFile, decoded: &[formats::mres::DecodedCluster]) -> Ed
         }
     }
     let ends = all.iter().map(|k| (positions[(k >> 32) as usize], positions[(k & 0xffff_ffff) as usize])).collect();
-    Edges { per_cluster, expected, special, ends }
+    Edges { per_cluster, original, expected, special, ends }
 }
 
 /// What one cut's check found.
@@ -389,7 +437,9 @@ fn random_views(file: &MresFile, n: usize, seed: u64) -> Vec<(select::ViewParams
                 center[1] + (s * phi.sin() * distance) as f32,
                 center[2] + (z * distance) as f32,
             ];
-            let tau = [0.25f32, 0.5, 1.0, 2.0, 4.0, 16.0][(next() * 6.0) as usize % 6];
+            // Thresholds log-uniform in [0.25, 16] px: continuous values probe every gap between
+            // stored errors, not just a few fixed ones.
+            let tau = (0.25 * 64f64.powf(next())) as f32;
             let view = select::ViewParams {
                 eye,
                 proj_y: 1.0 / (30f32.to_radians().tan()),

@@ -149,6 +149,18 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     report.relations_checked,
                     report.max_pinched_edges
                 );
+                let c = &report.conditioning;
+                println!(
+                    "depth {} vs log2(level-0 clusters) {:.1} (ratio {:.2}); reduction per level {}",
+                    report.levels,
+                    c.log2_level0_clusters,
+                    c.depth_ratio,
+                    c.reduction_per_level.iter().map(|r| format!("{r:.2}")).collect::<Vec<_>>().join(" ")
+                );
+                println!(
+                    "edge age mean {:.2} max {} ({} locked original edges); same-boundary clusters {}; group sizes {:?}",
+                    c.edge_age_mean, c.edge_age_max, c.locked_original_edges, c.same_boundary_clusters, c.group_size_histogram
+                );
                 for v in &report.violations {
                     println!("VIOLATION {}: {v}", file.display());
                 }

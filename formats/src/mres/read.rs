@@ -297,6 +297,27 @@ impl MresFile {
             }
             pages[p].dependencies = list;
         }
+        // Group ranges tile the clusters in order; pages tile the page data.
+        let mut next_cluster = 0u64;
+        for (g, group) in groups.iter().enumerate() {
+            if group.first_cluster as u64 != next_cluster {
+                return Err(corrupt(format!("group {g}: clusters do not follow the previous group's")));
+            }
+            next_cluster += group.cluster_count as u64;
+        }
+        if next_cluster != cluster_count as u64 {
+            return Err(corrupt("groups do not cover every cluster".into()));
+        }
+        let mut next_offset = pages_start;
+        for (p, page) in pages.iter().enumerate() {
+            if page.offset != next_offset {
+                return Err(corrupt(format!("page {p}: data at {} but the previous page ends at {next_offset}", page.offset)));
+            }
+            next_offset += page.compressed_size as u64;
+        }
+        if next_offset != bytes.len() as u64 {
+            return Err(corrupt(format!("page data ends at {next_offset} but the file has {} bytes", bytes.len())));
+        }
         // Each group's clusters must lie in the page it names.
         for (g, group) in groups.iter().enumerate() {
             let page = &pages[group.page as usize];
@@ -394,7 +415,7 @@ fn decode_cluster(h: &Header, raw: &[u8], info: &ClusterInfo, index: u32) -> Res
         let mut at = v * stride;
         for k in 0..3 {
             let d = read_bits(pos_bytes, at, bits[k]).ok_or_else(|| bad("positions"))?;
-            p[k] = (lo[k] as i64 + d as i64) as i32;
+            p[k] = i32::try_from(lo[k] as i64 + d as i64).map_err(|_| bad("position overflows i32"))?;
             at += bits[k] as u64;
         }
         positions.push(p);
