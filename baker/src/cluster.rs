@@ -58,7 +58,8 @@ pub const NESTING_MARGIN: f64 = 1e-3;
 /// one contains the others, else on the centre of their bounding box.
 pub fn enclosing_sphere(spheres: impl Iterator<Item = Sphere> + Clone) -> Sphere {
     let dist = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] as f64 - b[k] as f64).powi(2)).sum::<f64>().sqrt();
-    let reach = |center: [f32; 3]| spheres.clone().map(|s| dist(center, s.center) + s.radius as f64).fold(0.0f64, f64::max);
+    let reach =
+        |center: [f32; 3]| spheres.clone().map(|s| dist(center, s.center) + s.radius as f64).fold(0.0f64, f64::max);
     let largest = spheres.clone().fold(None::<Sphere>, |best, s| match best {
         Some(b) if b.radius >= s.radius => Some(b),
         _ => Some(s),

@@ -114,7 +114,9 @@ pub(crate) fn conditioning(
         if mine.is_empty() {
             continue;
         }
-        if let Some(child) = (g.first_cluster..g.first_cluster + g.cluster_count).find(|&m| boundary(m as usize) == mine) {
+        if let Some(child) =
+            (g.first_cluster..g.first_cluster + g.cluster_count).find(|&m| boundary(m as usize) == mine)
+        {
             out.same_boundary_clusters += 1;
             if out.same_boundary_examples.len() < 5 {
                 out.same_boundary_examples.push(format!("cluster {c} and its child {child} in group {own}"));

@@ -3,6 +3,7 @@
 #![deny(missing_docs)]
 
 pub mod bake;
+pub mod batch;
 pub mod bench;
 pub mod cluster;
 pub mod conditioning;

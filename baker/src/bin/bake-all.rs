@@ -1,19 +1,27 @@
-//! `bake-all`: bake every OBJ/glTF/GLB under a directory into `.mres` files.
+//! `bake-all`: bake every OBJ/glTF/GLB under a directory into `.mres` files, in parallel,
+//! skipping what the content-addressed cache already holds.
 
 use anyhow::{Context, Result};
-use baker::bake::bake_file;
+use baker::batch::{find_assets, AssetReport, Batch};
 use baker::config::{PipelineConfig, DEFAULT_PIPELINE_TOML};
 use clap::Parser;
-use formats::import::InputKind;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 #[derive(Parser)]
 #[command(
     name = "bake-all",
     version,
-    about = "Bake every OBJ, glTF and GLB under a directory into .mres cluster-DAG files"
+    about = "Bake every OBJ, glTF and GLB under a directory into .mres cluster-DAG files",
+    long_about = "Bake every OBJ, glTF and GLB under a directory into .mres cluster-DAG files.\n\n\
+        Assets bake in parallel; each one is looked up first in a content-addressed cache keyed by its bytes, \
+        the files it references, its effective settings and the format and baker versions, so an unchanged tree \
+        bakes nothing. Outputs mirror the asset tree. Exit code 0 when every asset baked, 1 when some failed \
+        (the others are still written), 2 on a usage or set-up error."
 )]
 struct Cli {
     /// Asset directory (or a single mesh file).
@@ -24,9 +32,21 @@ struct Cli {
     /// Settings file. Default: pipeline.toml at the root of the asset tree, else the embedded defaults.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Worker threads for the DAG build (default: all cores).
+    /// Cache directory. Default: [cache] dir of the config (".mres-cache").
+    #[arg(long)]
+    cache_dir: Option<PathBuf>,
+    /// Bake everything, neither reading nor writing the cache.
+    #[arg(long)]
+    no_cache: bool,
+    /// Worker threads, shared by assets and by the groups of each DAG build (default: all cores).
     #[arg(short, long)]
     jobs: Option<usize>,
+    /// Write per-asset figures (triangles, levels, clusters, bytes, seconds, cache hit) as JSON.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Only print failures and the summary.
+    #[arg(short, long)]
+    quiet: bool,
 }
 
 fn main() -> ExitCode {
@@ -39,98 +59,104 @@ fn main() -> ExitCode {
     }
 }
 
-/// Mesh files under `root`, sorted; other files are counted.
-fn walk(root: &Path, found: &mut Vec<PathBuf>, skipped: &mut usize) -> Result<()> {
-    let mut entries: Vec<_> =
-        std::fs::read_dir(root).with_context(|| format!("{}", root.display()))?.collect::<Result<_, _>>()?;
-    entries.sort_by_key(|e| e.path());
-    for e in entries {
-        let path = e.path();
-        if path.is_dir() {
-            walk(&path, found, skipped)?;
-        } else if InputKind::from_path(&path).is_some() {
-            found.push(path);
-        } else {
-            *skipped += 1;
-        }
+fn load_config(cli: &Cli, root: &Path) -> Result<PipelineConfig> {
+    let root_config = root.join("pipeline.toml");
+    match (&cli.config, root_config.is_file()) {
+        (Some(path), _) => PipelineConfig::load(path),
+        (None, true) => PipelineConfig::load(&root_config),
+        (None, false) => PipelineConfig::parse(DEFAULT_PIPELINE_TOML, "embedded pipeline.toml"),
     }
-    Ok(())
+    .map_err(anyhow::Error::msg)
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
     if let Some(jobs) = cli.jobs {
         rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global()?;
     }
-    let root_config = cli.input.join("pipeline.toml");
-    let config = match (&cli.config, root_config.is_file()) {
-        (Some(path), _) => PipelineConfig::load(path),
-        (None, true) => PipelineConfig::load(&root_config),
-        (None, false) => PipelineConfig::parse(DEFAULT_PIPELINE_TOML, "embedded pipeline.toml"),
+    if !cli.input.exists() {
+        anyhow::bail!("{}: no such file or directory", cli.input.display());
     }
-    .map_err(anyhow::Error::msg)?;
-    let out_dir = cli.output.clone().unwrap_or_else(|| PathBuf::from(&config.output.dir));
-
-    let (root, files, skipped) = if cli.input.is_file() {
+    let (root, assets, skipped) = if cli.input.is_file() {
         (cli.input.parent().unwrap_or(Path::new(".")).to_path_buf(), vec![cli.input.clone()], 0)
     } else {
-        let mut files = Vec::new();
-        let mut skipped = 0;
-        walk(&cli.input, &mut files, &mut skipped)?;
-        (cli.input.clone(), files, skipped)
+        let (assets, skipped) = find_assets(&cli.input)?;
+        (cli.input.clone(), assets, skipped)
     };
+    let config = load_config(&cli, &root)?;
+    let out_dir = cli.output.clone().unwrap_or_else(|| PathBuf::from(&config.output.dir));
+    let cache = if cli.no_cache || !config.cache.enabled {
+        None
+    } else {
+        let dir = cli.cache_dir.clone().unwrap_or_else(|| PathBuf::from(&config.cache.dir));
+        Some(cache::LocalDisk::open(&dir).with_context(|| format!("cache {}", dir.display()))?)
+    };
+
     let start = Instant::now();
-    let (mut baked, mut failed, mut tris_in, mut bytes_out) = (0, 0, 0u64, 0u64);
-    for (i, file) in files.iter().enumerate() {
-        let rel = file.strip_prefix(&root).unwrap_or(file);
-        let target = out_dir.join(rel).with_extension("mres");
-        let t0 = Instant::now();
-        match bake_file(file, &config.bake).and_then(|b| Ok(b)) {
-            Ok(b) => {
-                let write = || -> Result<()> {
-                    if let Some(dir) = target.parent() {
-                        std::fs::create_dir_all(dir)?;
-                    }
-                    let tmp = target.with_extension("mres.tmp");
-                    std::fs::write(&tmp, &b.bytes)?;
-                    std::fs::rename(&tmp, &target)?;
-                    Ok(())
-                };
-                if let Err(e) = write() {
-                    failed += 1;
-                    eprintln!(
-                        "[{}/{}] FAILED {}: writing {}: {e:#}",
-                        i + 1,
-                        files.len(),
-                        file.display(),
-                        target.display()
-                    );
-                    continue;
+    let bar = (std::io::stderr().is_terminal() && !cli.quiet).then(|| {
+        let bar = ProgressBar::new(assets.len() as u64);
+        bar.set_style(
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} assets {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        );
+        bar
+    });
+    let (done, cached) = (AtomicUsize::new(0), AtomicUsize::new(0));
+    let total = assets.len();
+    let batch = Batch { root: &root, out_dir: &out_dir, config: &config, cache: cache.as_ref() };
+    let reports = batch.run(&assets, |r: &AssetReport| {
+        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+        let c = cached.fetch_add(r.cache_hit as usize, Ordering::Relaxed) + r.cache_hit as usize;
+        let line = match &r.error {
+            Some(e) => format!("[{n}/{total}] FAILED {}", e),
+            None => format!(
+                "[{n}/{total}] {} {}: {} triangles, {} levels, {} clusters, {:.2} B/tri, {:.2}s",
+                r.status,
+                r.input.display(),
+                r.input_triangles,
+                r.levels,
+                r.clusters,
+                r.bytes_per_input_triangle,
+                r.seconds
+            ),
+        };
+        match &bar {
+            Some(bar) => {
+                bar.set_message(format!("({c} cached, {} baked)", n - c));
+                if r.error.is_some() {
+                    bar.println(line);
                 }
-                baked += 1;
-                tris_in += b.stats.source_triangles;
-                bytes_out += b.stats.bytes;
-                eprintln!(
-                    "[{}/{}] {} -> {}: {} triangles, {} clusters, {} groups, {:.2} B/tri, {:.2}s",
-                    i + 1,
-                    files.len(),
-                    file.display(),
-                    target.display(),
-                    b.stats.source_triangles,
-                    b.stats.clusters,
-                    b.stats.groups,
-                    b.stats.bytes as f64 / b.stats.source_triangles.max(1) as f64,
-                    t0.elapsed().as_secs_f64()
-                );
+                bar.inc(1);
             }
-            Err(e) => {
-                failed += 1;
-                eprintln!("[{}/{}] FAILED {}: {e}", i + 1, files.len(), file.display());
-            }
+            None if !cli.quiet || r.error.is_some() => eprintln!("{line}"),
+            None => {}
         }
+    });
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
     }
+
+    let count = |s: &str| reports.iter().filter(|r| r.status == s).count();
+    let (baked, hits, failed) = (count("baked"), count("cached"), count("failed"));
+    let tris: u64 = reports.iter().map(|r| r.input_triangles).sum();
+    let bytes: u64 = reports.iter().map(|r| r.bytes).sum();
+    let repaired = reports.iter().filter(|r| r.cache_repaired).count();
     eprintln!(
-        "baked {baked}, failed {failed}, skipped {skipped} non-mesh files; {tris_in} triangles in, {bytes_out} bytes out; {:.1}s",
-        start.elapsed().as_secs_f64()
+        "{} assets: {baked} baked, {hits} cached, {failed} failed; {skipped} other files skipped; {tris} triangles in, {bytes} bytes out ({:.2} B/tri); {:.2}s{}",
+        reports.len(),
+        bytes as f64 / tris.max(1) as f64,
+        start.elapsed().as_secs_f64(),
+        if repaired > 0 { format!("; {repaired} corrupt cache entries re-baked") } else { String::new() }
     );
+    for r in reports.iter().filter(|r| r.error.is_some()) {
+        eprintln!("failed: {}", r.error.as_deref().unwrap_or(""));
+    }
+    if let Some(path) = &cli.report {
+        let json = serde_json::json!({
+            "assets": reports, "baked": baked, "cached": hits, "failed": failed, "skipped": skipped,
+            "input_triangles": tris, "bytes": bytes, "seconds": start.elapsed().as_secs_f64(),
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&json)?).with_context(|| format!("{}", path.display()))?;
+    }
     Ok(if failed == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }

@@ -74,6 +74,15 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Maintain the bake cache: stats, verify (check every entry; --repair removes corrupt
+    /// ones), gc --max-size SIZE (drop least recently used entries until the cache fits).
+    Cache {
+        #[command(subcommand)]
+        action: CacheAction,
+        /// Cache directory.
+        #[arg(long, default_value = ".mres-cache", global = true)]
+        cache_dir: PathBuf,
+    },
     /// One builder run of `bench` (internal).
     #[command(hide = true)]
     BenchChild {
@@ -93,6 +102,25 @@ enum Command {
         /// Output OBJ path.
         #[arg(short, long)]
         output: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
+enum CacheAction {
+    /// Entries, bytes, temporary files, oldest and newest entry.
+    Stats,
+    /// Read every entry and check its header and content hash; exit 1 if any is corrupt.
+    Verify {
+        /// Remove corrupt entries.
+        #[arg(long)]
+        repair: bool,
+    },
+    /// Remove stale temporary files, then least recently used entries until the cache holds at
+    /// most SIZE (e.g. 500M, 2G; K/M/G/T are powers of 1024).
+    Gc {
+        /// Largest total size to keep.
+        #[arg(long, value_parser = cache::parse_size)]
+        max_size: u64,
     },
 }
 
@@ -198,6 +226,56 @@ fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench { input, repeat, json } => bench(&input, repeat.max(1), json),
+        Command::Cache { action, cache_dir } => {
+            let disk = cache::LocalDisk::open(&cache_dir).with_context(|| format!("cache {}", cache_dir.display()))?;
+            match action {
+                CacheAction::Stats => {
+                    let s = disk.stats()?;
+                    println!(
+                        "{}: {} entries, {} bytes, {} temporary files",
+                        cache_dir.display(),
+                        s.entries,
+                        s.bytes,
+                        s.temp_files
+                    );
+                }
+                CacheAction::Verify { repair } => {
+                    let r = disk.verify(repair)?;
+                    println!(
+                        "{}: {} entries checked, {} valid ({} bytes), {} corrupt",
+                        cache_dir.display(),
+                        r.checked,
+                        r.valid,
+                        r.valid_bytes,
+                        r.corrupt.len()
+                    );
+                    for c in &r.corrupt {
+                        println!(
+                            "corrupt: {}: {}{}",
+                            c.path.display(),
+                            c.problem,
+                            if c.removed { " (removed)" } else { "" }
+                        );
+                    }
+                    if !r.is_clean() && !repair {
+                        return Ok(ExitCode::from(1));
+                    }
+                }
+                CacheAction::Gc { max_size } => {
+                    let r = disk.gc(max_size)?;
+                    println!(
+                        "{}: removed {} entries ({} bytes) and {} temporary files; kept {} entries ({} bytes)",
+                        cache_dir.display(),
+                        r.entries_removed,
+                        r.bytes_removed,
+                        r.temp_removed,
+                        r.entries_kept,
+                        r.bytes_kept
+                    );
+                }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
         Command::BenchChild { builder, input } => {
             let settings = BakeSettings::default();
             let mesh = formats::import::import_file(&input, &Default::default())?;

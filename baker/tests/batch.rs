@@ -1,0 +1,254 @@
+//! `bake-all` as a pipeline service (issue #3): cache hits and misses on every key input,
+//! overrides, reports, concurrent bakers, a killed baker, corrupt cache entries.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BAKE_ALL: &str = env!("CARGO_BIN_EXE_bake-all");
+const MRES: &str = env!("CARGO_BIN_EXE_mres");
+
+fn run(bin: &str, args: &[&str]) -> Output {
+    Command::new(bin).args(args).output().expect("run")
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+struct Tree {
+    _dir: tempfile::TempDir,
+    assets: PathBuf,
+    out: PathBuf,
+    cache: PathBuf,
+    report: PathBuf,
+}
+
+fn tree() -> Tree {
+    let dir = tempfile::tempdir().unwrap();
+    let assets = dir.path().join("assets");
+    std::fs::create_dir_all(assets.join("scans")).unwrap();
+    for (kind, n, rel) in
+        [("sphere", "8", "ball.obj"), ("terrain", "16", "scans/ground.obj"), ("boxes", "8", "scans/crates.obj")]
+    {
+        let o = run(MRES, &["generate", kind, n, "-o", assets.join(rel).to_str().unwrap()]);
+        assert!(o.status.success(), "{}", text(&o));
+    }
+    // An OBJ that references a material library: the .mtl is part of its cache key.
+    let obj = std::fs::read_to_string(assets.join("ball.obj")).unwrap();
+    std::fs::write(assets.join("painted.obj"), format!("mtllib painted.mtl\n{obj}")).unwrap();
+    std::fs::write(assets.join("painted.mtl"), "newmtl m0\nKd 1 0 0\n").unwrap();
+    Tree {
+        out: dir.path().join("out"),
+        cache: dir.path().join("cache"),
+        report: dir.path().join("report.json"),
+        assets,
+        _dir: dir,
+    }
+}
+
+impl Tree {
+    fn bake(&self, extra: &[&str]) -> serde_json::Value {
+        let mut args = vec![
+            self.assets.to_str().unwrap(),
+            "-o",
+            self.out.to_str().unwrap(),
+            "--cache-dir",
+            self.cache.to_str().unwrap(),
+            "--report",
+            self.report.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = run(BAKE_ALL, &args);
+        assert!(o.status.success(), "{}", text(&o));
+        serde_json::from_str(&std::fs::read_to_string(&self.report).unwrap()).unwrap()
+    }
+
+    fn baked_names(report: &serde_json::Value) -> Vec<String> {
+        let mut names: Vec<String> = report["assets"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|a| a["status"] == "baked")
+            .map(|a| Path::new(a["input"].as_str().unwrap()).file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    }
+}
+
+#[test]
+fn second_run_bakes_nothing_and_each_key_input_rebakes_exactly_its_assets() {
+    let t = tree();
+    let first = t.bake(&[]);
+    assert_eq!(first["baked"], 4);
+    assert_eq!(first["skipped"], 1, "the .mtl is not a mesh");
+    let a = &first["assets"][0];
+    for field in [
+        "input_triangles",
+        "levels",
+        "clusters",
+        "groups",
+        "root_clusters",
+        "bytes",
+        "bytes_per_input_triangle",
+        "seconds",
+        "cache_hit",
+    ] {
+        assert!(!a[field].is_null(), "report lacks {field}");
+    }
+    let outputs: Vec<Vec<u8>> = ["ball", "painted", "scans/ground", "scans/crates"]
+        .iter()
+        .map(|n| std::fs::read(t.out.join(format!("{n}.mres"))).unwrap())
+        .collect();
+
+    let second = t.bake(&[]);
+    assert_eq!(second["baked"], 0);
+    assert_eq!(second["cached"], 4);
+
+    // Input bytes: touch one asset.
+    let ball = t.assets.join("ball.obj");
+    let mut text = std::fs::read_to_string(&ball).unwrap();
+    text.push_str("# edited\n");
+    std::fs::write(&ball, text).unwrap();
+    assert_eq!(Tree::baked_names(&t.bake(&[])), ["ball.obj"]);
+
+    // A referenced file.
+    std::fs::write(t.assets.join("painted.mtl"), "newmtl m0\nKd 0 1 0\n").unwrap();
+    assert_eq!(Tree::baked_names(&t.bake(&[])), ["painted.obj"]);
+
+    // One setting, for the assets an override matches.
+    std::fs::write(t.assets.join("pipeline.toml"), "[[override]]\nglob = \"scans/**\"\nnormal_bits = 8\n").unwrap();
+    assert_eq!(Tree::baked_names(&t.bake(&[])), ["crates.obj", "ground.obj"]);
+    // A global setting re-bakes everything.
+    std::fs::write(t.assets.join("pipeline.toml"), "[bake]\nposition_bits = 15\n").unwrap();
+    assert_eq!(t.bake(&[])["baked"], 4);
+    // Back to the defaults: everything comes from the cache, byte-identical to the first run.
+    std::fs::remove_file(t.assets.join("pipeline.toml")).unwrap();
+    std::fs::write(
+        &ball,
+        std::fs::read(t.assets.join("painted.obj"))
+            .unwrap()
+            .split(|&b| b == b'\n')
+            .skip(1)
+            .collect::<Vec<_>>()
+            .join(&b'\n'),
+    )
+    .unwrap();
+    std::fs::write(t.assets.join("painted.mtl"), "newmtl m0\nKd 1 0 0\n").unwrap();
+    let back = t.bake(&[]);
+    assert_eq!(back["baked"], 0, "{back:#}");
+    for (n, bytes) in ["ball", "painted", "scans/ground", "scans/crates"].iter().zip(&outputs) {
+        assert_eq!(&std::fs::read(t.out.join(format!("{n}.mres"))).unwrap(), bytes, "{n}");
+    }
+}
+
+#[test]
+fn corrupt_cache_entries_are_detected_and_rebaked() {
+    let t = tree();
+    t.bake(&[]);
+    // Flip a byte in every cache entry.
+    let mut entries = Vec::new();
+    for fan in std::fs::read_dir(&t.cache).unwrap().flatten().filter(|e| e.path().is_dir() && e.file_name() != "tmp") {
+        entries.extend(std::fs::read_dir(fan.path()).unwrap().flatten().map(|e| e.path()));
+    }
+    assert_eq!(entries.len(), 4);
+    for e in &entries {
+        let mut b = std::fs::read(e).unwrap();
+        let n = b.len();
+        b[n - 10] ^= 0xff;
+        std::fs::write(e, b).unwrap();
+    }
+    let v = run(MRES, &["cache", "verify", "--cache-dir", t.cache.to_str().unwrap()]);
+    assert_eq!(v.status.code(), Some(1), "{}", text(&v));
+    assert!(text(&v).contains("4 corrupt"), "{}", text(&v));
+    let report = t.bake(&[]);
+    assert_eq!(report["baked"], 4);
+    assert!(report["assets"].as_array().unwrap().iter().all(|a| a["cache_repaired"] == true));
+    let v = run(MRES, &["cache", "verify", "--cache-dir", t.cache.to_str().unwrap()]);
+    assert!(v.status.success(), "{}", text(&v));
+}
+
+#[test]
+fn concurrent_bakers_share_one_cache() {
+    let t = tree();
+    let out2 = t.out.with_file_name("out2");
+    let spawn = |out: &Path| {
+        Command::new(BAKE_ALL)
+            .args([
+                t.assets.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "--cache-dir",
+                t.cache.to_str().unwrap(),
+                "-q",
+            ])
+            .spawn()
+            .unwrap()
+    };
+    let (mut a, mut b) = (spawn(&t.out), spawn(&out2));
+    assert!(a.wait().unwrap().success() && b.wait().unwrap().success());
+    for n in ["ball", "painted", "scans/ground", "scans/crates"] {
+        let f = format!("{n}.mres");
+        assert_eq!(std::fs::read(t.out.join(&f)).unwrap(), std::fs::read(out2.join(&f)).unwrap(), "{n}");
+    }
+    let v = run(MRES, &["cache", "verify", "--cache-dir", t.cache.to_str().unwrap()]);
+    assert!(v.status.success() && text(&v).contains("0 corrupt"), "{}", text(&v));
+}
+
+#[test]
+fn a_killed_baker_leaves_the_cache_clean() {
+    let t = tree();
+    // A bigger asset so that the kill lands mid-bake.
+    let big = t.assets.join("big.obj");
+    assert!(run(MRES, &["generate", "sphere", "120", "-o", big.to_str().unwrap()]).status.success());
+    let mut child = Command::new(BAKE_ALL)
+        .args([
+            t.assets.to_str().unwrap(),
+            "-o",
+            t.out.to_str().unwrap(),
+            "--cache-dir",
+            t.cache.to_str().unwrap(),
+            "-q",
+        ])
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let v = run(MRES, &["cache", "verify", "--cache-dir", t.cache.to_str().unwrap()]);
+    assert!(v.status.success() && text(&v).contains("0 corrupt"), "{}", text(&v));
+    // No partial outputs: every .mres present validates.
+    for e in walk(&t.out) {
+        let o = run(MRES, &["validate", e.to_str().unwrap(), "--random-cuts", "10"]);
+        assert!(o.status.success(), "{}: {}", e.display(), text(&o));
+    }
+    // And the next run completes.
+    assert_eq!(t.bake(&[])["failed"], 0);
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                out.extend(walk(&p));
+            } else if p.extension().is_some_and(|x| x == "mres") {
+                out.push(p);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn output_is_identical_for_any_jobs() {
+    let t = tree();
+    t.bake(&["--no-cache", "--jobs", "1"]);
+    let one: Vec<Vec<u8>> = walk(&t.out).iter().map(|p| std::fs::read(p).unwrap()).collect();
+    std::fs::remove_dir_all(&t.out).unwrap();
+    t.bake(&["--no-cache", "--jobs", "2"]);
+    let two: Vec<Vec<u8>> = walk(&t.out).iter().map(|p| std::fs::read(p).unwrap()).collect();
+    assert_eq!(one.len(), 4);
+    assert_eq!(one, two);
+}
