@@ -79,11 +79,17 @@ struct RawConfig {
 /// errors naming the key.
 fn merge(base: &BakeSettings, keys: &toml::Table) -> Result<BakeSettings, String> {
     let mut table = toml::Table::try_from(base).map_err(|e| e.to_string())?;
+    let mut settings = base.clone();
+    // One key at a time, so that a type error names its key.
     for (k, v) in keys {
+        if !table.contains_key(k) {
+            return Err(format!("unknown key `{k}`"));
+        }
         table.insert(k.clone(), v.clone());
+        settings = toml::Value::Table(table.clone())
+            .try_into()
+            .map_err(|e: toml::de::Error| format!("`{k}` = {v}: {}", e.message()))?;
     }
-    let settings: BakeSettings =
-        toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| e.message().to_string())?;
     settings.check()?;
     Ok(settings)
 }

@@ -311,7 +311,10 @@ impl MresFile {
         let mut next_offset = pages_start;
         for (p, page) in pages.iter().enumerate() {
             if page.offset != next_offset {
-                return Err(corrupt(format!("page {p}: data at {} but the previous page ends at {next_offset}", page.offset)));
+                return Err(corrupt(format!(
+                    "page {p}: data at {} but the previous page ends at {next_offset}",
+                    page.offset
+                )));
             }
             next_offset += page.compressed_size as u64;
         }
