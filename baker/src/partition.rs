@@ -17,6 +17,9 @@ const LOCALITY_WEIGHT: i32 = 1;
 /// Weight of one shared boundary edge.
 const EDGE_WEIGHT: i32 = 16;
 
+/// Serializes calls into METIS (see `metis_bisect`).
+static METIS_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Weighted, undirected cluster graph in CSR form.
 pub struct ClusterGraph {
     xadj: Vec<i32>,
@@ -206,6 +209,10 @@ fn metis_bisect(graph: &ClusterGraph, nodes: &[u32], share: f32, local: &mut [u3
     }
     let tpwgts = [share, 1.0 - share];
     let mut part = vec![0i32; nodes.len()];
+    // METIS keeps its random state in a process-wide global that each call re-seeds: calls
+    // from two threads (two assets baking at once) would interleave and make the partition
+    // depend on timing. Serialize them; partitioning is a small part of a bake.
+    let _guard = METIS_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let result = metis::Graph::new(1, 2, &xadj, &adjncy)
         .ok()?
         .set_adjwgt(&weights)
