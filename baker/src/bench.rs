@@ -20,6 +20,10 @@ pub struct BuilderRun {
     pub builder: String,
     /// Seconds to build (ours: weld + DAG + compressed file; clusterlod: clod_build).
     pub seconds: f64,
+    /// Seconds to build the DAG in memory, the part comparable to clod_build (ours: weld + DAG,
+    /// without encoding and compressing the file; clusterlod: the same as `seconds`).
+    #[serde(default)]
+    pub dag_seconds: f64,
     /// Peak resident set of the whole child process (import included), bytes.
     pub peak_rss_bytes: u64,
     /// Input triangles.
@@ -58,12 +62,15 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
     let start = Instant::now();
     let baked = bake_mesh(mesh, settings)?;
     let seconds = start.elapsed().as_secs_f64();
+    let dag_seconds =
+        baked.stats.build.stage_seconds.iter().filter(|(s, _)| s != "write" && s != "encode").map(|(_, t)| t).sum();
     let file = MresFile::parse(baked.bytes)?;
     let tri = |cut: Vec<u32>| cut.iter().map(|&c| file.clusters[c as usize].triangle_count as u64).sum();
     let level0: Vec<_> = file.clusters.iter().filter(|c| c.own_group == formats::mres::NO_GROUP).collect();
     Ok(BuilderRun {
         builder: "mres".into(),
         seconds,
+        dag_seconds,
         peak_rss_bytes: peak_rss(),
         input_triangles,
         levels: file.header.level_count,
@@ -129,6 +136,7 @@ pub fn run_clusterlod(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Resu
     Ok(BuilderRun {
         builder: "clusterlod".into(),
         seconds,
+        dag_seconds: seconds,
         peak_rss_bytes: peak_rss(),
         input_triangles,
         levels: groups.iter().map(|g| g.0 + 1).max().unwrap_or(0) as u32,
