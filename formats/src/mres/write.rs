@@ -30,7 +30,7 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
     let header_flags = dag.header.flags;
     let encoded: Vec<EncodedCluster> = layout
         .cluster_order
-        .iter()
+        .par_iter()
         .map(|&c| encode_cluster(&dag.clusters[c], &dag.header, header_flags, c))
         .collect::<Result<_, _>>()?;
     let pages = pack_pages(&layout, &encoded);
@@ -225,7 +225,8 @@ struct PageBuild {
 
 /// Greedily fills pages with whole groups in coarse-to-fine order.
 fn pack_pages(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageBuild> {
-    let mut pages = Vec::new();
+    // Page boundaries first (cheap, sequential), then the pages themselves in parallel.
+    let mut spans = Vec::new();
     let mut start_group = 0usize;
     while start_group < layout.group_ranges.len() {
         let mut end_group = start_group;
@@ -239,18 +240,23 @@ fn pack_pages(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageBuild> {
             size += group_size;
             end_group += 1;
         }
-        let first_cluster = layout.group_ranges[start_group].0;
-        let (last_first, last_count) = layout.group_ranges[end_group - 1];
-        let cluster_count = last_first + last_count - first_cluster;
-        pages.push(assemble_page(
-            &encoded[first_cluster as usize..(first_cluster + cluster_count) as usize],
-            first_cluster,
-            start_group as u32,
-            (end_group - start_group) as u32,
-        ));
+        spans.push((start_group, end_group));
         start_group = end_group;
     }
-    pages
+    spans
+        .par_iter()
+        .map(|&(start_group, end_group)| {
+            let first_cluster = layout.group_ranges[start_group].0;
+            let (last_first, last_count) = layout.group_ranges[end_group - 1];
+            let cluster_count = last_first + last_count - first_cluster;
+            assemble_page(
+                &encoded[first_cluster as usize..(first_cluster + cluster_count) as usize],
+                first_cluster,
+                start_group as u32,
+                (end_group - start_group) as u32,
+            )
+        })
+        .collect()
 }
 
 /// Lays out a page: all cluster headers first, then the data blocks grouped by kind (every
