@@ -11,6 +11,7 @@ pub mod config;
 pub mod dag;
 pub mod export;
 pub mod generate;
+pub mod honesty;
 pub mod partition;
 pub mod settings;
 pub mod simplify;

@@ -189,6 +189,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     "edge age mean {:.2} max {} ({} locked original edges); same-boundary clusters {}; group sizes {:?}",
                     c.edge_age_mean, c.edge_age_max, c.locked_original_edges, c.same_boundary_clusters, c.group_size_histogram
                 );
+                println!(
+                    "error honesty: worst {:.2} p99 {:.2} (measured distance / stored error, {} cuts, {} points); worst at {}",
+                    report.honesty.worst_ratio, report.honesty.p99_ratio, report.honesty.cuts, report.honesty.samples, report.honesty.worst
+                );
                 for v in &report.violations {
                     println!("VIOLATION {}: {v}", file.display());
                 }
