@@ -1,7 +1,9 @@
+//! Where the bytes of a `.mres` file go, by page section, each compressed separately:
+//! `cargo run --release -p mres-baker --example size_breakdown -- FILE.mres`.
 use formats::mres::MresFile;
 fn main() {
     let path = std::env::args().nth(1).unwrap();
-    let f = MresFile::open(std::path::Path::new(&path)).unwrap();
+    let f = MresFile::open(std::path::Path::new(&path)).expect("a readable .mres file");
     let mut cats: Vec<Vec<u8>> = vec![Vec::new(); 6];
     for p in 0..f.pages.len() as u32 {
         let raw = f.page(p).unwrap();

@@ -8,6 +8,7 @@
 //! parallel but collected in partition order.
 
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
+use crate::edges::sorted_edge_keys;
 use crate::partition::{cluster_graph, partition};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Method};
@@ -205,23 +206,15 @@ fn level0_clusters(mesh: &WeldedMesh, settings: &BakeSettings) -> Vec<Vec<u32>> 
         .collect()
 }
 
-/// Edge key of two position ids, independent of direction.
-fn edge_key(a: u32, b: u32) -> u64 {
-    (a.min(b) as u64) << 32 | a.max(b) as u64
-}
-
-/// Position-id edge keys of a triangle list, one per triangle side.
-fn edge_keys<'a>(mesh: &'a WeldedMesh, indices: &'a [u32]) -> impl Iterator<Item = u64> + 'a {
-    indices.chunks_exact(3).flat_map(move |t| {
-        (0..3).map(move |k| edge_key(mesh.position_ids[t[k] as usize], mesh.position_ids[t[(k + 1) % 3] as usize]))
-    })
-}
-
 /// The original's open (used once) and non-manifold (used 3+ times) edges, with their use
 /// counts, sorted; and per position whether it lies on one. Those positions stay locked at
 /// every level so that every cut has exactly the original's boundary.
 fn open_and_nonmanifold(mesh: &WeldedMesh) -> (Vec<bool>, Vec<(u64, u32)>) {
-    let mut edges: Vec<u64> = mesh.indices.par_chunks(3 * 4096).flat_map_iter(|c| edge_keys(mesh, c)).collect();
+    let mut edges: Vec<u64> = mesh
+        .indices
+        .par_chunks(3 * 4096)
+        .flat_map_iter(|c| sorted_edge_keys(c, |v| mesh.position_ids[v as usize]))
+        .collect();
     edges.par_sort_unstable();
     let mut locked = vec![false; mesh.position_count];
     let mut special = Vec::new();

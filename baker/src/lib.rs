@@ -9,6 +9,7 @@ pub mod cluster;
 pub mod conditioning;
 pub mod config;
 pub mod dag;
+pub mod edges;
 pub mod export;
 pub mod generate;
 pub mod honesty;

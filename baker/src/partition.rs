@@ -40,17 +40,7 @@ pub fn cluster_graph(clusters: &[&[u32]], position_ids: &[u32], centers: &[[f32;
         .par_iter()
         .enumerate()
         .flat_map_iter(|(c, tris)| {
-            let mut keys: Vec<u64> = tris
-                .chunks_exact(3)
-                .flat_map(|t| {
-                    (0..3).map(move |k| {
-                        let a = position_ids[t[k] as usize];
-                        let b = position_ids[t[(k + 1) % 3] as usize];
-                        (a.min(b) as u64) << 32 | a.max(b) as u64
-                    })
-                })
-                .collect();
-            keys.sort_unstable();
+            let keys = crate::edges::sorted_edge_keys(tris, |v| position_ids[v as usize]);
             let boundary: Vec<(u64, u32)> =
                 keys.chunk_by(|a, b| a == b).filter(|r| r.len() != 2).map(|r| (r[0], c as u32)).collect();
             boundary

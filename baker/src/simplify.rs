@@ -183,18 +183,7 @@ struct EdgeCounts {
 }
 
 fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
-    let mut keys: Vec<u64> = indices
-        .chunks_exact(3)
-        .flat_map(|t| {
-            (0..3).map(move |k| {
-                let a = mesh.position_ids[t[k] as usize];
-                let b = mesh.position_ids[t[(k + 1) % 3] as usize];
-                (a.min(b) as u64) << 32 | a.max(b) as u64
-            })
-        })
-        .collect();
-    keys.sort_unstable();
-    keys
+    crate::edges::sorted_edge_keys(indices, |v| mesh.position_ids[v as usize])
 }
 
 impl EdgeCounts {

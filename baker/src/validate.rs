@@ -319,19 +319,7 @@ fn edge_tables(file: &MresFile, decoded: &[formats::mres::DecodedCluster]) -> Ed
                 })
             })
             .collect();
-        let mut keys: Vec<u64> = c
-            .indices
-            .chunks_exact(3)
-            .flat_map(|t| {
-                let ids = &ids;
-                (0..3).map(move |k| {
-                    let (a, b) = (ids[t[k] as usize], ids[t[(k + 1) % 3] as usize]);
-                    (a.min(b) as u64) << 32 | a.max(b) as u64
-                })
-            })
-            .collect();
-        keys.sort_unstable();
-        keys_per_cluster.push(keys);
+        keys_per_cluster.push(crate::edges::sorted_edge_keys(&c.indices, |i| ids[i as usize]));
     }
     let mut all: Vec<u64> = keys_per_cluster.iter().flatten().copied().collect();
     all.par_sort_unstable();
