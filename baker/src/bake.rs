@@ -56,20 +56,42 @@ pub enum BakeError {
     Write(#[from] formats::mres::write::WriteError),
 }
 
+/// Receives a line for each stage of a bake ("weld: 871,414 triangles", "level 3: …"), for
+/// progress displays. Called from the baking thread.
+pub type Progress<'a> = &'a (dyn Fn(&str) + Sync);
+
 /// Imports and bakes the mesh file at `path`.
 pub fn bake_file(path: &Path, settings: &BakeSettings) -> Result<Baked, BakeError> {
+    bake_file_with_progress(path, settings, &|_| {})
+}
+
+/// [`bake_file`], reporting each stage to `progress`.
+pub fn bake_file_with_progress(path: &Path, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
+    let _span = tracing::info_span!("bake", path = %path.display()).entered();
     let start = Instant::now();
+    progress("import");
     let mesh = import_file(path, &ImportLimits::default())?;
     let import_seconds = start.elapsed().as_secs_f64();
-    let mut baked = bake_mesh(mesh, settings)?;
+    tracing::info!(triangles = mesh.triangle_count(), seconds = import_seconds, "imported");
+    let mut baked = bake_mesh_with_progress(mesh, settings, progress)?;
     baked.stats.import_seconds = import_seconds;
     Ok(baked)
 }
 
 /// Bakes an imported mesh (consumed, so its memory is freed once welded).
 pub fn bake_mesh(mesh: SourceMesh, settings: &BakeSettings) -> Result<Baked, BakeError> {
+    bake_mesh_with_progress(mesh, settings, &|_| {})
+}
+
+/// [`bake_mesh`], reporting each stage to `progress`.
+pub fn bake_mesh_with_progress(
+    mesh: SourceMesh,
+    settings: &BakeSettings,
+    progress: Progress,
+) -> Result<Baked, BakeError> {
     settings.check().map_err(BakeError::Settings)?;
     let start = Instant::now();
+    progress(&format!("weld: {} triangles", mesh.triangle_count()));
     let welded = weld(&mesh, settings);
     let weld_seconds = start.elapsed().as_secs_f64();
     let source_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
@@ -78,7 +100,7 @@ pub fn bake_mesh(mesh: SourceMesh, settings: &BakeSettings) -> Result<Baked, Bak
         Some(w) if !w.indices.is_empty() => w,
         _ => return Err(BakeError::Empty(source_triangles)),
     };
-    let (dag, mut build) = build_dag(&welded, settings);
+    let (dag, mut build) = build_dag(&welded, settings, progress);
     build.stage_seconds.insert(0, ("weld".into(), weld_seconds));
     let mut stats = BakeStats {
         source_triangles,
@@ -90,9 +112,11 @@ pub fn bake_mesh(mesh: SourceMesh, settings: &BakeSettings) -> Result<Baked, Bak
         ..Default::default()
     };
     drop(welded);
+    progress("write");
     let write_start = Instant::now();
     let bytes = formats::mres::write_mres(&dag, settings.zstd_level)?;
     stats.build.stage_seconds.push(("write".into(), write_start.elapsed().as_secs_f64()));
+    tracing::info!(bytes = bytes.len(), groups = stats.groups, clusters = stats.clusters, stages = ?stats.build.stage_seconds, "baked");
     Ok(Baked {
         stats: BakeStats { bytes: bytes.len() as u64, build_seconds: start.elapsed().as_secs_f64(), ..stats },
         bytes,

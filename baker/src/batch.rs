@@ -2,7 +2,7 @@
 //! bake the misses in parallel, write the outputs atomically and report per asset. One bad
 //! asset never stops the others.
 
-use crate::bake::bake_file;
+use crate::bake::bake_file_with_progress;
 use crate::config::PipelineConfig;
 use crate::settings::BakeSettings;
 use cache::{CacheKey, KeyInputs, LocalDisk, Lookup, Storage};
@@ -84,6 +84,8 @@ pub struct Batch<'a> {
     pub config: &'a PipelineConfig,
     /// The cache, if used.
     pub cache: Option<&'a LocalDisk>,
+    /// Receives (asset, stage line) while an asset bakes.
+    pub stage: &'a (dyn Fn(&Path, &str) + Sync),
 }
 
 /// The cache key of `input` under `settings`: input bytes, referenced files, settings, versions.
@@ -171,7 +173,8 @@ impl Batch<'_> {
                     Lookup::Miss => {}
                 }
             }
-            let baked = bake_file(input, &settings).map_err(|e| e.to_string())?;
+            let baked = bake_file_with_progress(input, &settings, &|line| (self.stage)(input, line))
+                .map_err(|e| e.to_string())?;
             if let (Some(cache), Some(key)) = (self.cache, &key) {
                 cache.put(key, &baked.bytes).map_err(|e| format!("cache: {e}"))?;
             }

@@ -53,7 +53,7 @@ pub struct BuildStats {
 }
 
 /// Builds the cluster DAG of a welded mesh.
-pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats) {
+pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings, progress: crate::bake::Progress) -> (Dag, BuildStats) {
     let mut stats = BuildStats::default();
     let mut clock = std::time::Instant::now();
     let mut lap = |stats: &mut BuildStats, stage: &str| {
@@ -69,6 +69,7 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
         .collect();
     let (always_locked, special) = open_and_nonmanifold(mesh);
     lap(&mut stats, "level 0");
+    progress(&format!("level 0: {} clusters", clusters.len()));
     let mut groups: Vec<Group> = Vec::new();
     let mut pending: Vec<usize> = (0..clusters.len()).collect();
     let mut level = 0u32;
@@ -140,6 +141,9 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings) -> (Dag, BuildStats
         }
         next.sort_unstable();
         pending = next;
+        let triangles: usize = pending.iter().map(|&c| clusters[c].indices.len() / 3).sum();
+        progress(&format!("level {}: {} clusters, {triangles} triangles", level + 1, pending.len()));
+        tracing::info!(level = level + 1, clusters = pending.len(), triangles, groups = parts.len(), "level built");
         level += 1;
         if !progressed {
             break;

@@ -5,11 +5,13 @@ use anyhow::{Context, Result};
 use baker::batch::{find_assets, AssetReport, Batch};
 use baker::config::{PipelineConfig, DEFAULT_PIPELINE_TOML};
 use clap::Parser;
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use std::collections::{HashMap, HashSet};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 #[derive(Parser)]
@@ -47,7 +49,21 @@ struct Cli {
     /// Only print failures and the summary.
     #[arg(short, long)]
     quiet: bool,
+    /// Format of the tracing log on stderr (spans per asset and stage; filter with RUST_LOG,
+    /// e.g. RUST_LOG=info).
+    #[arg(long, value_enum, default_value = "text")]
+    log_format: LogFormat,
 }
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum LogFormat {
+    Text,
+    Json,
+}
+
+/// Assets with at least this many triangles get their stages printed when stderr is not a
+/// terminal (a terminal shows every baking asset's stage in its own line).
+const LARGE_ASSET_TRIANGLES: u64 = 1_000_000;
 
 fn main() -> ExitCode {
     match run(Cli::parse()) {
@@ -69,7 +85,18 @@ fn load_config(cli: &Cli, root: &Path) -> Result<PipelineConfig> {
     .map_err(anyhow::Error::msg)
 }
 
+fn init_tracing(format: LogFormat) {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    match format {
+        LogFormat::Text => builder.init(),
+        LogFormat::Json => builder.json().init(),
+    }
+}
+
 fn run(cli: Cli) -> Result<ExitCode> {
+    init_tracing(cli.log_format);
     if let Some(jobs) = cli.jobs {
         rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global()?;
     }
@@ -92,8 +119,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
     };
 
     let start = Instant::now();
+    let multi = MultiProgress::new();
     let bar = (std::io::stderr().is_terminal() && !cli.quiet).then(|| {
-        let bar = ProgressBar::new(assets.len() as u64);
+        let bar = multi.add(ProgressBar::new(assets.len() as u64));
         bar.set_style(
             ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} assets {msg}")
                 .unwrap_or_else(|_| ProgressStyle::default_bar())
@@ -103,7 +131,38 @@ fn run(cli: Cli) -> Result<ExitCode> {
     });
     let (done, cached) = (AtomicUsize::new(0), AtomicUsize::new(0));
     let total = assets.len();
-    let batch = Batch { root: &root, out_dir: &out_dir, config: &config, cache: cache.as_ref() };
+    // Per baking asset: a spinner with its stage on a terminal, else plain lines for large ones.
+    let spinners: Mutex<HashMap<PathBuf, ProgressBar>> = Mutex::new(HashMap::new());
+    let large: Mutex<HashSet<PathBuf>> = Mutex::new(HashSet::new());
+    let stage = |asset: &Path, line: &str| {
+        if cli.quiet {
+            return;
+        }
+        if bar.is_some() {
+            let mut spinners = spinners.lock().unwrap_or_else(|e| e.into_inner());
+            let spinner = spinners.entry(asset.to_path_buf()).or_insert_with(|| {
+                let s = multi.add(ProgressBar::new_spinner());
+                s.enable_steady_tick(std::time::Duration::from_millis(200));
+                s
+            });
+            spinner.set_message(format!("{}: {line}", asset.display()));
+            if line == "write" {
+                spinner.finish_and_clear();
+                spinners.remove(asset);
+            }
+            return;
+        }
+        let mut large = large.lock().unwrap_or_else(|e| e.into_inner());
+        let triangles =
+            line.strip_prefix("weld: ").and_then(|t| t.split(' ').next()).and_then(|n| n.parse::<u64>().ok());
+        if triangles.is_some_and(|n| n >= LARGE_ASSET_TRIANGLES) {
+            large.insert(asset.to_path_buf());
+        }
+        if large.contains(asset) {
+            eprintln!("  {}: {line}", asset.display());
+        }
+    };
+    let batch = Batch { root: &root, out_dir: &out_dir, config: &config, cache: cache.as_ref(), stage: &stage };
     let reports = batch.run(&assets, |r: &AssetReport| {
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
         let c = cached.fetch_add(r.cache_hit as usize, Ordering::Relaxed) + r.cache_hit as usize;
@@ -132,7 +191,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             None => {}
         }
     });
-    if let Some(bar) = bar {
+    if let Some(bar) = &bar {
         bar.finish_and_clear();
     }
 

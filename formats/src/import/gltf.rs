@@ -64,8 +64,10 @@ type Buffers<'a> = Vec<Option<Cow<'a, [u8]>>>;
 pub(super) fn import(path: &Path, bytes: &[u8], kind: InputKind, limits: &ImportLimits) -> KindResult<SourceMesh> {
     let (json_bytes, bin) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
-    let instances = scene_instances(&document)?;
-    let plan = plan(&document, &instances, limits)?;
+    // Count first, check against the limits, and only then expand the node graph: a small file
+    // can describe millions of instances.
+    let plan = plan(&document, &mesh_instance_counts(&document)?, limits)?;
+    let instances = scene_instances(&document, &plan)?;
     let buffers = load_buffers(&document, &plan, &asset_dir(path), bin, limits)?;
     read_mesh(&document, &instances, &plan, &buffers)
 }
@@ -74,8 +76,7 @@ pub(super) fn import(path: &Path, bytes: &[u8], kind: InputKind, limits: &Import
 pub(super) fn referenced_files(path: &Path, bytes: &[u8], kind: InputKind) -> KindResult<Vec<PathBuf>> {
     let (json_bytes, _) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
-    let instances = scene_instances(&document)?;
-    let plan = plan(&document, &instances, &ImportLimits::default())?;
+    let plan = plan(&document, &mesh_instance_counts(&document)?, &ImportLimits::default())?;
     let dir = asset_dir(path);
     let mut files = Vec::new();
     for buffer in document.buffers() {
@@ -193,16 +194,16 @@ fn prepare_positions(root: &mut json::Root) -> KindResult<()> {
     Ok(())
 }
 
-/// The meshes of the scene to import, with their world transforms, in depth-first order.
-fn scene_instances(document: &Document) -> KindResult<Vec<Instance>> {
+/// How many times each mesh is instanced by the scene to import, without expanding the node
+/// graph (a small file can describe millions of instances). Rejects cycles and scenes of more
+/// than `MAX_NODE_INSTANCES` node instances.
+fn mesh_instance_counts(document: &Document) -> KindResult<Vec<u64>> {
     if document.meshes().len() == 0 {
         return Err(ImportErrorKind::NoMeshes);
     }
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
-        let all = document.meshes().map(|mesh| Instance { mesh: mesh.index(), transform: IDENTITY });
-        return Ok(all.collect());
+        return Ok(vec![1; document.meshes().len()]);
     };
-    // Size the expansion before doing it (this also rejects cycles).
     let expanded = expanded_sizes(document)?;
     let total = scene.nodes().fold(0u64, |sum, n| sum.saturating_add(expanded[n.index()]));
     if total > MAX_NODE_INSTANCES {
@@ -210,12 +211,49 @@ fn scene_instances(document: &Document) -> KindResult<Vec<Instance>> {
             "the scene expands to {total} node instances, the limit is {MAX_NODE_INSTANCES}"
         )));
     }
+    // Instances per node, pushed from parents to children in topological order (Kahn).
+    let nodes: Vec<_> = document.nodes().collect();
+    let mut incoming = vec![0usize; nodes.len()];
+    for node in &nodes {
+        for child in node.children() {
+            incoming[child.index()] += 1;
+        }
+    }
+    let mut count = vec![0u64; nodes.len()];
+    for root in scene.nodes() {
+        count[root.index()] += 1;
+    }
+    let mut ready: Vec<usize> = (0..nodes.len()).filter(|&n| incoming[n] == 0).collect();
+    let mut per_mesh = vec![0u64; document.meshes().len()];
+    while let Some(n) = ready.pop() {
+        if let Some(mesh) = nodes[n].mesh() {
+            per_mesh[mesh.index()] = per_mesh[mesh.index()].saturating_add(count[n]);
+        }
+        for child in nodes[n].children() {
+            let c = child.index();
+            count[c] = count[c].saturating_add(count[n]);
+            incoming[c] -= 1;
+            if incoming[c] == 0 {
+                ready.push(c);
+            }
+        }
+    }
+    Ok(per_mesh)
+}
+
+/// The meshes of the scene to import that have triangles to read (`plan`), with their world
+/// transforms, in depth-first order. Call after `plan` has checked the counts.
+fn scene_instances(document: &Document, plan: &Plan) -> KindResult<Vec<Instance>> {
+    let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
+        let all = document.meshes().map(|mesh| Instance { mesh: mesh.index(), transform: IDENTITY });
+        return Ok(all.collect());
+    };
     let mut instances = Vec::new();
     let mut stack: Vec<_> = scene.nodes().map(|node| (node, IDENTITY)).collect();
     stack.reverse();
     while let Some((node, parent)) = stack.pop() {
         let world = multiply(&parent, &node.transform().matrix());
-        if let Some(mesh) = node.mesh() {
+        if let Some(mesh) = node.mesh().filter(|m| !plan.primitives[m.index()].is_empty()) {
             instances.push(Instance { mesh: mesh.index(), transform: world });
         }
         let children: Vec<_> = node.children().collect();
@@ -270,12 +308,8 @@ fn expanded_sizes(document: &Document) -> KindResult<Vec<u64>> {
 }
 
 /// Checks every primitive of every instanced mesh and sizes the result against `limits`.
-fn plan(document: &Document, instances: &[Instance], limits: &ImportLimits) -> KindResult<Plan> {
+fn plan(document: &Document, instance_count: &[u64], limits: &ImportLimits) -> KindResult<Plan> {
     let mesh_count = document.meshes().len();
-    let mut instance_count = vec![0u64; mesh_count];
-    for instance in instances {
-        instance_count[instance.mesh] += 1;
-    }
     let mut plan = Plan {
         primitives: vec![Vec::new(); mesh_count],
         has_normals: true,

@@ -1,0 +1,104 @@
+//! Shared by the `mres_reader_resealed` fuzz target and the `unseal` example: conversion
+//! between a real `.mres` file and an "unsealed" one whose pages are stored uncompressed and
+//! whose checksums are not checked, so that a mutation of a hierarchy record, page-table
+//! field or cluster byte reaches the reader's consistency checks instead of being stopped by
+//! blake3 or zstd. Offsets follow `docs/FORMAT.md` (header fields at fixed positions).
+
+use formats::mres::{HEADER_SIZE, PAGE_RECORD_SIZE};
+
+const PAGE_COUNT_AT: usize = 68;
+const HIERARCHY_OFFSET_AT: usize = 80;
+const HIERARCHY_SIZE_AT: usize = 88;
+const TABLE_OFFSET_AT: usize = 96;
+const TABLE_SIZE_AT: usize = 104;
+const CHECKSUM_AT: usize = 112;
+/// Within a page record: u64 offset, u32 compressed size, u32 raw size, [u8; 32] blake3.
+const REC_OFFSET: usize = 0;
+const REC_COMPRESSED: usize = 8;
+const REC_RAW: usize = 12;
+const REC_CHECKSUM: usize = 16;
+
+fn u32_at(b: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(at..at.checked_add(4)?)?.try_into().ok()?))
+}
+
+fn u64_at(b: &[u8], at: usize) -> Option<u64> {
+    Some(u64::from_le_bytes(b.get(at..at.checked_add(8)?)?.try_into().ok()?))
+}
+
+fn range(start: u64, len: u64, total: usize) -> Option<std::ops::Range<usize>> {
+    let end = start.checked_add(len)?;
+    (end <= total as u64).then_some(start as usize..end as usize)
+}
+
+/// Header-declared layout: (hierarchy range, page-table range, page count), if in bounds.
+fn layout(b: &[u8]) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>, usize)> {
+    if b.len() < HEADER_SIZE {
+        return None;
+    }
+    let hierarchy = range(u64_at(b, HIERARCHY_OFFSET_AT)?, u64_at(b, HIERARCHY_SIZE_AT)?, b.len())?;
+    let table = range(u64_at(b, TABLE_OFFSET_AT)?, u64_at(b, TABLE_SIZE_AT)?, b.len())?;
+    let pages = u32_at(b, PAGE_COUNT_AT)? as usize;
+    // Only records that lie inside the table are rewritten; the reader rejects the rest.
+    let pages = pages.min(table.len() / PAGE_RECORD_SIZE);
+    Some((hierarchy, table, pages))
+}
+
+/// Rewrites the header checksum over header[..112], hierarchy and page table.
+fn seal_header(out: &mut [u8]) {
+    let Some((hierarchy, table, _)) = layout(out) else { return };
+    let mut hasher = blake3::Hasher::new();
+    hasher.update(&out[..CHECKSUM_AT]);
+    hasher.update(&out[hierarchy]);
+    hasher.update(&out[table]);
+    let hash = *hasher.finalize().as_bytes();
+    out[CHECKSUM_AT..CHECKSUM_AT + 32].copy_from_slice(&hash);
+}
+
+/// Unsealed → real `.mres`: every page record whose byte range lies inside `input` has that
+/// range zstd-compressed (level 1) and appended after the page table in record order, with
+/// offset, sizes and page checksum rewritten; then the header checksum is recomputed.
+/// Anything that does not fit this shape is passed through unchanged (the reader rejects it).
+pub fn seal(input: &[u8]) -> Vec<u8> {
+    let Some((_, table, pages)) = layout(input) else { return input.to_vec() };
+    let mut out = input[..table.end].to_vec();
+    for p in 0..pages {
+        let rec = table.start + p * PAGE_RECORD_SIZE;
+        let (Some(offset), Some(size)) = (u64_at(input, rec + REC_OFFSET), u32_at(input, rec + REC_COMPRESSED)) else {
+            continue;
+        };
+        let Some(raw) = range(offset, size as u64, input.len()).map(|r| &input[r]) else { continue };
+        let Ok(frame) = zstd::bulk::compress(raw, 1) else { continue };
+        let at = out.len() as u64;
+        out[rec + REC_OFFSET..rec + REC_OFFSET + 8].copy_from_slice(&at.to_le_bytes());
+        out[rec + REC_COMPRESSED..rec + REC_COMPRESSED + 4].copy_from_slice(&(frame.len() as u32).to_le_bytes());
+        out[rec + REC_RAW..rec + REC_RAW + 4].copy_from_slice(&(raw.len() as u32).to_le_bytes());
+        out[rec + REC_CHECKSUM..rec + REC_CHECKSUM + 32].copy_from_slice(blake3::hash(&frame).as_bytes());
+        out.extend_from_slice(&frame);
+    }
+    seal_header(&mut out);
+    out
+}
+
+/// Real `.mres` → unsealed: pages decompressed in place of their frames (offsets and sizes
+/// rewritten, checksums zeroed). Used to make seeds for `mres_reader_resealed`.
+#[allow(dead_code)]
+pub fn unseal(input: &[u8]) -> Option<Vec<u8>> {
+    let (_, table, pages) = layout(input)?;
+    let mut out = input[..table.end].to_vec();
+    for p in 0..pages {
+        let rec = table.start + p * PAGE_RECORD_SIZE;
+        let offset = u64_at(input, rec + REC_OFFSET)?;
+        let size = u32_at(input, rec + REC_COMPRESSED)?;
+        let raw_size = u32_at(input, rec + REC_RAW)?;
+        let frame = &input[range(offset, size as u64, input.len())?];
+        let raw = zstd::bulk::decompress(frame, raw_size as usize).ok()?;
+        let at = out.len() as u64;
+        out[rec + REC_OFFSET..rec + REC_OFFSET + 8].copy_from_slice(&at.to_le_bytes());
+        out[rec + REC_COMPRESSED..rec + REC_COMPRESSED + 4].copy_from_slice(&(raw.len() as u32).to_le_bytes());
+        out[rec + REC_CHECKSUM..rec + REC_CHECKSUM + 32].fill(0);
+        out.extend_from_slice(&raw);
+    }
+    out[CHECKSUM_AT..CHECKSUM_AT + 32].fill(0);
+    Some(out)
+}
