@@ -146,6 +146,58 @@ fn sphere_free_box(k: u32) -> SourceMesh {
     mesh(positions, cube.indices)
 }
 
+/// Foliage-like aggregate geometry: `count` disconnected two-triangle cards (open quads) of
+/// random size and orientation in a unit cube (deterministic).
+pub fn cards(count: u32) -> SourceMesh {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f32 / (1u64 << 53) as f32
+    };
+    let (mut positions, mut indices) = (Vec::new(), Vec::new());
+    for _ in 0..count {
+        let c = [next(), next(), next()];
+        let s = 0.01 + 0.03 * next();
+        let (a, b) = (next() * std::f32::consts::TAU, next() * std::f32::consts::PI);
+        let u = [a.cos() * s, a.sin() * s, 0.0];
+        let v = [0.0, b.cos() * s, b.sin() * s];
+        let base = positions.len() as u32;
+        for (du, dv) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            positions.push([0, 1, 2].map(|k| c[k] + du * u[k] + dv * v[k]));
+        }
+        indices.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+    mesh(positions, indices)
+}
+
+/// The cube-sphere with defects real scans and CAD exports have: every 97th triangle removed
+/// (holes), every 89th duplicated, and a fin of two triangles on one edge per 1,000 triangles
+/// (non-manifold edges used three times).
+pub fn defects(n: u32) -> SourceMesh {
+    let base = sphere(n);
+    let mut positions = base.positions.clone();
+    let mut indices = Vec::new();
+    for (t, tri) in base.indices.chunks_exact(3).enumerate() {
+        if t % 97 == 13 {
+            continue;
+        }
+        indices.extend_from_slice(tri);
+        if t % 89 == 7 {
+            indices.extend_from_slice(tri);
+        }
+        if t % 1000 == 500 {
+            // A fin standing on the edge tri[0]-tri[1].
+            let (a, b) = (positions[tri[0] as usize], positions[tri[1] as usize]);
+            let tip = [0, 1, 2].map(|k| (a[k] + b[k]) * 0.5 * 1.05);
+            positions.push(tip);
+            indices.extend_from_slice(&[tri[0], tri[1], positions.len() as u32 - 1]);
+        }
+    }
+    mesh(positions, indices)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -93,9 +93,11 @@ enum Command {
     },
     /// Write a generated test mesh as OBJ: sphere N (12·N² triangles, closed), terrain N
     /// (2·N² triangles, open), boxes N (N disconnected boxes of 192 triangles), seamed-sphere N
-    /// (a sphere whose 6 faces are separate UV charts and materials).
+    /// (a sphere whose 6 faces are separate UV charts and materials), cards N (N disconnected
+    /// open quads, like foliage), defects N (sphere N with holes, duplicate triangles and
+    /// non-manifold fins).
     Generate {
-        /// sphere, terrain, boxes or seamed-sphere.
+        /// sphere, terrain, boxes, seamed-sphere, cards or defects.
         kind: String,
         /// Size parameter.
         n: u32,
@@ -297,7 +299,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 "terrain" => baker::generate::terrain(n),
                 "boxes" => baker::generate::boxes(n, 4),
                 "seamed-sphere" => baker::generate::seamed_sphere(n),
-                other => bail!("unknown kind {other} (sphere, terrain, boxes, seamed-sphere)"),
+                "cards" => baker::generate::cards(n),
+                "defects" => baker::generate::defects(n),
+                other => bail!("unknown kind {other} (sphere, terrain, boxes, seamed-sphere, cards, defects)"),
             };
             let mut out = std::io::BufWriter::new(
                 std::fs::File::create(&output).with_context(|| format!("{}", output.display()))?,
