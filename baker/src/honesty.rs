@@ -47,7 +47,7 @@ fn soup(file: &MresFile, decoded: &[DecodedCluster], clusters: impl Iterator<Ite
 
 /// Deterministic sample points: every triangle's centroid and edge midpoints, thinned to at
 /// most `max` points (triangle order, even stride).
-fn samples(s: &Soup, max: usize) -> Vec<([f64; 3], u32)> {
+fn samples(s: &Soup, max: usize) -> Vec<([f64; 3], u32, usize)> {
     let stride = (s.tris.len() * 4).div_ceil(max.max(1)).max(1);
     let mut out = Vec::new();
     for (i, t) in s.tris.iter().enumerate() {
@@ -59,7 +59,7 @@ fn samples(s: &Soup, max: usize) -> Vec<([f64; 3], u32)> {
         ];
         for (k, p) in [c, mid(t[0], t[1]), mid(t[1], t[2]), mid(t[2], t[0])].into_iter().enumerate() {
             if (i * 4 + k) % stride == 0 {
-                out.push((p, s.cluster[i]));
+                out.push((p, s.cluster[i], i));
             }
         }
     }
@@ -79,6 +79,7 @@ pub fn measure(file: &MresFile, decoded: &[DecodedCluster], cuts: usize, samples
         (0..file.clusters.len() as u32).filter(|&c| file.clusters[c as usize].own_group == NO_GROUP),
     );
     let level0_bvh = Bvh::new(&level0.tris);
+    let part_size = component_diagonals(&level0.tris);
     let mut errors: Vec<f32> = groups.iter().map(|g| g.error).filter(|e| e.is_finite() && *e > 0.0).collect();
     errors.sort_by(f32::total_cmp);
     errors.dedup();
@@ -94,7 +95,7 @@ pub fn measure(file: &MresFile, decoded: &[DecodedCluster], cuts: usize, samples
         // Cut → original: compare with the drawn cluster's own error.
         let forward: Vec<(f64, String)> = samples(&cut_soup, samples_per_cut)
             .par_iter()
-            .map(|(p, c)| {
+            .map(|(p, c, _)| {
                 let d = level0_bvh.distance(&level0.tris, *p);
                 (
                     ratio(d, own_error(*c), floor),
@@ -107,8 +108,9 @@ pub fn measure(file: &MresFile, decoded: &[DecodedCluster], cuts: usize, samples
         let bound = drawn_ancestor_error(file, &cut, &own_error);
         let backward: Vec<(f64, String)> = samples(&level0, samples_per_cut)
             .par_iter()
-            .map(|(p, l)| {
-                let d = cut_bvh.distance(&cut_soup.tris, *p);
+            .map(|(p, l, tri)| {
+                // A part that vanished entirely is off by at most its own size on screen.
+                let d = cut_bvh.distance(&cut_soup.tris, *p).min(part_size[*tri]);
                 let e = bound[*l as usize];
                 (ratio(d, e, floor), format!("cut at {t}: original point {p:?} of cluster {l} is {d:.3e} from the cut, whose clusters there claim {e:.3e}"))
             })
@@ -125,6 +127,53 @@ pub fn measure(file: &MresFile, decoded: &[DecodedCluster], cuts: usize, samples
         out.p99_ratio = ratios[(ratios.len() * 99 / 100).min(ratios.len() - 1)].0;
     }
     out
+}
+
+/// Per triangle, the bounding-box diagonal of its connected component (triangles sharing a
+/// vertex position): when simplification drops a whole small part (a far-away box), the
+/// deviation a viewer sees is the part's size, not its distance to the next surface.
+fn component_diagonals(tris: &[[[f64; 3]; 3]]) -> Vec<f64> {
+    let mut vertex: rustc_hash::FxHashMap<[u64; 3], u32> = rustc_hash::FxHashMap::default();
+    let mut parent: Vec<u32> = Vec::new();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
+        }
+        x
+    }
+    let ids: Vec<[u32; 3]> = tris
+        .iter()
+        .map(|t| {
+            t.map(|p| {
+                *vertex.entry(p.map(f64::to_bits)).or_insert_with(|| {
+                    parent.push(parent.len() as u32);
+                    parent.len() as u32 - 1
+                })
+            })
+        })
+        .collect();
+    for t in &ids {
+        for k in 1..3 {
+            let (a, b) = (find(&mut parent, t[0]), find(&mut parent, t[k]));
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    let mut lo = vec![[f64::INFINITY; 3]; parent.len()];
+    let mut hi = vec![[f64::NEG_INFINITY; 3]; parent.len()];
+    let roots: Vec<u32> = ids.iter().map(|t| find(&mut parent, t[0])).collect();
+    for (t, &r) in tris.iter().zip(&roots) {
+        for p in t {
+            for k in 0..3 {
+                lo[r as usize][k] = lo[r as usize][k].min(p[k]);
+                hi[r as usize][k] = hi[r as usize][k].max(p[k]);
+            }
+        }
+    }
+    let diag = |r: usize| (0..3).map(|k| (hi[r][k] - lo[r][k]).powi(2)).sum::<f64>().sqrt();
+    roots.iter().map(|&r| diag(r as usize)).collect()
 }
 
 /// Per cluster, the largest own error among the drawn clusters at or above it in the DAG
