@@ -18,8 +18,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Check a file: checksums and references, monotone errors and nested spheres, and
-    /// crack-free cuts at every uniform threshold and at random cameras. Exit 1 on any violation.
+    /// Check a file (DESIGN.md invariants 1–5): checksums and references, monotone errors and
+    /// nested spheres, crack-free cuts at every uniform threshold and at random cameras, DAG
+    /// conditioning (depth, edge age, group sizes, same-boundary clusters) and error honesty.
+    /// Thresholds are documented in `baker::validate::Thresholds`. Exit 1 on any violation.
     Validate {
         /// The .mres file.
         file: PathBuf,
