@@ -1,0 +1,229 @@
+// Shared declarations of every preview shader: the GPU-visible structs (mirrored once in Rust,
+// src/gpu_types.rs; the test `gpu_types::tests` parses the structs below and checks that the
+// Rust offsets agree), the bindings of the one descriptor set, and the exact f32 selection rule
+// of docs/FORMAT.md §6.
+//
+// Keep each struct member on its own line as `type name;` or `type name[N];`: the layout test
+// reads them.
+
+// One cluster's selection inputs (FORMAT.md §6) and where its data lives (§3.2, §5).
+// Level-0 clusters have own_error 0; root clusters have parent_error +inf.
+struct Cluster {
+    vec4 own_sphere;
+    vec4 parent_sphere;
+    float own_error;
+    float parent_error;
+    uint page;
+    uint header_offset;
+    uint vertex_count;
+    uint triangle_count;
+    uint pad0;
+    uint pad1;
+};
+
+// The camera and pass parameters (one per submission).
+struct View {
+    mat4 view_proj;
+    vec4 frustum[6];
+    vec3 eye;
+    float proj_y;
+    float viewport_height;
+    float z_near;
+    float tau;
+    uint flags;
+    vec3 grid_origin;
+    float grid_step;
+    uint cluster_count;
+    uint max_groups;
+    uint pad0;
+    uint pad1;
+};
+
+// Atomic counters that double as indirect arguments.
+struct Counters {
+    uint visible_count;
+    uint dispatch_x;
+    uint dispatch_y;
+    uint dispatch_z;
+    uint index_count;
+    uint instance_count;
+    uint first_index;
+    int vertex_offset;
+    uint first_instance;
+    uint mesh_x;
+    uint mesh_y;
+    uint mesh_z;
+    uint triangles;
+};
+
+// View.flags
+const uint FLAG_FRUSTUM_CULL = 1u;
+const uint FLAG_WRITE_PROJECTED = 2u;
+const uint FLAG_DROP_SOME = 4u;
+
+layout(set = 0, binding = 0, std140) uniform ViewBlock { View view; };
+layout(set = 0, binding = 1, std430) readonly buffer ClusterBlock { Cluster clusters[]; };
+// Byte offset of each decompressed page inside `page_words` (a multiple of 4).
+layout(set = 0, binding = 2, std430) readonly buffer PageBaseBlock { uint page_base[]; };
+// Every decompressed page, as is (FORMAT.md §5), one after the other.
+layout(set = 0, binding = 3, std430) readonly buffer PageBlock { uint page_words[]; };
+
+// Bit-stream read of FORMAT.md §5.2: `width` bits (0..=32) starting `bit` bits after the
+// 4-aligned byte offset `stream`, LSB first, possibly straddling two words.
+uint read_bits(uint stream, uint bit, uint width) {
+    if (width == 0u) {
+        return 0u;
+    }
+    uint w = (stream >> 2) + (bit >> 5);
+    uint s = bit & 31u;
+    uint v = page_words[w] >> s;
+    if (s + width > 32u) {
+        v |= page_words[w + 1u] << (32u - s);
+    }
+    return width == 32u ? v : (v & ((1u << width) - 1u));
+}
+
+uint read_u8(uint byte_offset) {
+    return (page_words[byte_offset >> 2] >> ((byte_offset & 3u) * 8u)) & 0xFFu;
+}
+
+// Object-space position of vertex `v` of cluster `c` (FORMAT.md §5.3, one f32 multiply, then
+// one f32 add, as the reference decoder does).
+vec3 decode_position(Cluster c, uint v) {
+    uint page = page_base[c.page];
+    uint header = page + c.header_offset;
+    uint hw = header >> 2;
+    ivec3 lo = ivec3(int(page_words[hw + 1u]), int(page_words[hw + 2u]), int(page_words[hw + 3u]));
+    uint bits_word = page_words[hw + 4u];
+    uvec3 bits = uvec3(bits_word & 0xFFu, (bits_word >> 8) & 0xFFu, (bits_word >> 16) & 0xFFu);
+    uint stream = page + page_words[hw + 5u];
+    uint bit = v * (bits.x + bits.y + bits.z);
+    uint dx = read_bits(stream, bit, bits.x);
+    uint dy = read_bits(stream, bit + bits.x, bits.y);
+    uint dz = read_bits(stream, bit + bits.x + bits.y, bits.z);
+    ivec3 q = lo + ivec3(int(dx), int(dy), int(dz));
+    precise vec3 scaled = vec3(q) * view.grid_step;
+    precise vec3 p = view.grid_origin + scaled;
+    return p;
+}
+
+// ---- Exact f32 arithmetic for the selection rule -------------------------------------------
+//
+// FORMAT.md §6 fixes every operation as one IEEE f32 operation rounded to nearest. Vulkan
+// guarantees correct rounding for add, sub and mul (and `precise` stops fusing into FMA), but
+// allows 2.5 ulp for division and an inversesqrt-derived precision for sqrt. So division and
+// sqrt take a candidate from f64 and then correct it with checks that are exact in f64: a
+// rounding midpoint between two adjacent f32 has 25 significant bits, so midpoint * f32 (49 bits)
+// and midpoint^2 (50 bits) are exactly representable in f64's 53.
+
+#ifdef NAIVE_ARITHMETIC
+// Diagnostic variant (select_naive.comp.spv, `preview --naive-arithmetic`): the driver's own
+// division and sqrt, to measure how far they are from the spec on a device.
+float div_rn(float a, float b) {
+    precise float q = a / b;
+    return q;
+}
+
+float sqrt_rn(float x) {
+    return sqrt(x);
+}
+#else
+float next_up(float x) {   // x finite, >= 0
+    return uintBitsToFloat(floatBitsToUint(x) + 1u);
+}
+
+float next_down(float x) { // x finite, > 0
+    return uintBitsToFloat(floatBitsToUint(x) - 1u);
+}
+
+bool is_odd(float x) {
+    return (floatBitsToUint(x) & 1u) != 0u;
+}
+
+// a / b rounded to nearest even, for finite a >= 0 and finite b > 0.
+float div_rn(float a, float b) {
+    float q = float(double(a) / double(b));
+    if (isinf(q) || a == 0.0) {
+        return q;
+    }
+    double da = double(a);
+    double db = double(b);
+    for (int i = 0; i < 2; i++) {
+        precise double mid = (double(q) + double(next_up(q))) * 0.5lf;
+        precise double m = mid * db;
+        if (da > m || (da == m && is_odd(q))) {
+            q = next_up(q);
+        } else {
+            break;
+        }
+    }
+    for (int i = 0; i < 2; i++) {
+        if (q == 0.0) {
+            break;
+        }
+        precise double mid = (double(q) + double(next_down(q))) * 0.5lf;
+        precise double m = mid * db;
+        if (da < m || (da == m && is_odd(q))) {
+            q = next_down(q);
+        } else {
+            break;
+        }
+    }
+    return q;
+}
+
+// sqrt(x) rounded to nearest even, for finite x >= 0.
+float sqrt_rn(float x) {
+    if (x == 0.0) {
+        return x;
+    }
+    float s = float(sqrt(double(x)));
+    double dx = double(x);
+    for (int i = 0; i < 2; i++) {
+        precise double mid = (double(s) + double(next_up(s))) * 0.5lf;
+        precise double m = mid * mid;
+        if (dx > m || (dx == m && is_odd(s))) {
+            s = next_up(s);
+        } else {
+            break;
+        }
+    }
+    for (int i = 0; i < 2; i++) {
+        if (s == 0.0) {
+            break;
+        }
+        precise double mid = (double(s) + double(next_down(s))) * 0.5lf;
+        precise double m = mid * mid;
+        if (dx < m || (dx == m && is_odd(s))) {
+            s = next_down(s);
+        } else {
+            break;
+        }
+    }
+    return s;
+}
+#endif
+
+// FORMAT.md §6: projected(sphere, error) in pixels, with the spec's operations in its order:
+// dx = center - eye; d = sqrt((dx*dx + dy*dy) + dz*dz); d = max(d - radius, z_near);
+// p = ((error / d) * (H * 0.5)) * proj11. +inf stays +inf.
+float projected_error(vec4 sphere, float error) {
+    if (error == 0.0) {
+        return 0.0;
+    }
+    precise float dx = sphere.x - view.eye.x;
+    precise float dy = sphere.y - view.eye.y;
+    precise float dz = sphere.z - view.eye.z;
+    precise float xx = dx * dx;
+    precise float yy = dy * dy;
+    precise float zz = dz * dz;
+    precise float sum = (xx + yy) + zz;
+    float distance = sqrt_rn(sum);
+    precise float near_d = distance - sphere.w;
+    float d = max(near_d, view.z_near);
+    float q = isinf(error) ? error : div_rn(error, d);
+    precise float half_h = view.viewport_height * 0.5;
+    precise float scaled = q * half_h;
+    precise float p = scaled * view.proj_y;
+    return p;
+}

@@ -1,0 +1,18 @@
+//! `mres-preview`: renders `.mres` files through the GPU selection path an engine would use
+//! (DESIGN.md "The preview renderer").
+//!
+//! - [`scene`] flattens a file into GPU inputs: one [`gpu_types::GpuCluster`] per cluster and
+//!   the decompressed pages as is, with a page base table.
+//! - [`vk`] holds every `unsafe` Vulkan call: the context, the owners of each object, and the
+//!   [`vk::Renderer`] that runs the selection compute pass and the fallback draw
+//!   (compute-expanded index buffer + indirect indexed draw).
+//! - [`verify`] proves a file: GPU selection equals the CPU reference for many cameras, and the
+//!   drawn cut of a closed mesh shows no back face from outside.
+#![deny(missing_docs)]
+
+pub mod camera;
+pub mod gpu_types;
+pub mod image;
+pub mod scene;
+pub mod verify;
+pub mod vk;

@@ -1,0 +1,223 @@
+//! `preview FILE.mres`: headless render, verify and screenshot modes of the mres preview.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context as _, Result};
+use clap::Parser;
+use formats::mres::MresFile;
+use preview::camera::Camera;
+use preview::gpu_types::FLAG_FRUSTUM_CULL;
+use preview::image::write_png;
+use preview::scene::SceneData;
+use preview::verify::{verify, VerifyOptions};
+use preview::vk::{ContextOptions, Device, Renderer, RendererOptions};
+use serde_json::json;
+
+/// Render a .mres file through the GPU selection path: verify it, or write a screenshot.
+#[derive(Parser, Debug)]
+#[command(version)]
+struct Args {
+    /// The .mres file.
+    file: PathBuf,
+    /// Render offscreen (no window). Required: the windowed viewer is not implemented.
+    #[arg(long)]
+    headless: bool,
+    /// Check GPU selection against the CPU reference and run the crack test; exit 1 on failure.
+    #[arg(long)]
+    verify: bool,
+    /// Enable VK_LAYER_KHRONOS_validation (with synchronization validation); any warning or
+    /// error message fails the run.
+    #[arg(long)]
+    validate: bool,
+    /// Write a screenshot PNG.
+    #[arg(long, value_name = "PNG")]
+    out: Option<PathBuf>,
+    /// Selection threshold of the screenshot, pixels.
+    #[arg(long, default_value_t = 1.0)]
+    tau: f32,
+    /// Eye position of the screenshot, `x,y,z` (object space); it looks at the model's centre.
+    /// Default: a three-quarter view framing the root bounding sphere.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    camera: Option<String>,
+    /// Image size, `WxH` (verify renders use it too).
+    #[arg(long, default_value = "512x512")]
+    size: String,
+    /// Cameras of the selection check (each with 4 thresholds: 0.25, 1, 4, 16 px).
+    #[arg(long, default_value_t = 200)]
+    cameras: usize,
+    /// Cameras of the crack test (each with 3 thresholds: 0.5, 2, 8 px).
+    #[arg(long, default_value_t = 16)]
+    crack_cameras: usize,
+    /// Write the verify report (and device facts) as JSON.
+    #[arg(long, value_name = "JSON")]
+    report: Option<PathBuf>,
+    /// Write PNGs of crack renders with flagged pixels into this directory.
+    #[arg(long, value_name = "DIR")]
+    failure_dir: Option<PathBuf>,
+    /// Use the first Vulkan device whose name contains this.
+    #[arg(long)]
+    device: Option<String>,
+    /// Diagnostic: select with the driver's own f32 division and sqrt (Vulkan allows them a few
+    /// ulp of error) instead of the exact ones, and report how often that changes the result.
+    #[arg(long)]
+    naive_arithmetic: bool,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s.split_once(['x', 'X']).context("--size wants WxH, e.g. 512x512")?;
+    let (w, h) = (w.trim().parse::<u32>()?, h.trim().parse::<u32>()?);
+    if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
+        bail!("--size {w}x{h}: each side must be 1..=16384");
+    }
+    Ok((w, h))
+}
+
+fn parse_vec3(s: &str) -> Result<[f32; 3]> {
+    let v: Vec<f32> = s.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().context("--camera wants x,y,z")?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => bail!("--camera wants three finite numbers x,y,z"),
+    }
+}
+
+fn run(args: Args) -> Result<ExitCode> {
+    if !args.headless {
+        bail!("the windowed viewer is not implemented: use --headless (with --verify and/or --out)");
+    }
+    if !args.verify && args.out.is_none() {
+        bail!("nothing to do: give --verify and/or --out PNG");
+    }
+    let (width, height) = parse_size(&args.size)?;
+    let file = MresFile::open(&args.file).with_context(|| format!("cannot read {}", args.file.display()))?;
+    let scene = SceneData::from_file(&file).with_context(|| format!("{}", args.file.display()))?;
+    let device = Device::new(&ContextOptions { validation: args.validate, device_name: args.device.clone(), allow_mesh_shaders: false })?;
+    let info = device.info.clone();
+    let counts = device.counts.clone();
+    println!(
+        "device: {} ({}; Vulkan {}; subgroup {}; mesh shaders {})",
+        info.name,
+        info.driver,
+        info.api_version,
+        info.subgroup_size,
+        if info.mesh_shader_available { "available" } else { "not available" }
+    );
+    println!("validation: {}", if args.validate { "on" } else { "off" });
+    println!(
+        "file: {} clusters, {} groups, {} pages ({} bytes decompressed), {} level-0 triangles",
+        file.clusters.len(),
+        file.groups.len(),
+        file.pages.len(),
+        scene.pages.len(),
+        scene.level0_triangles
+    );
+    let mut renderer = Renderer::new(&device, &scene, RendererOptions { naive_arithmetic: args.naive_arithmetic })?;
+    let mut ok = true;
+    let mut report_json = json!({
+        "file": args.file.display().to_string(),
+        "device": { "name": info.name, "driver": info.driver, "api_version": info.api_version,
+                    "subgroup_size": info.subgroup_size, "mesh_shader_available": info.mesh_shader_available },
+        "path": "fallback (compute-expanded index buffer + indirect indexed draw)",
+        "selection_arithmetic": if args.naive_arithmetic { "naive (driver division and sqrt)" } else { "exact (FORMAT.md §6)" },
+        "clusters": file.clusters.len(),
+    });
+
+    if let Some(out) = &args.out {
+        let camera = match &args.camera {
+            Some(c) => Camera::looking_at(parse_vec3(c)?, &scene.bounds, width, height),
+            None => Camera::framing(&scene.bounds, width, height),
+        };
+        let view = camera.gpu_view(args.tau, &scene.grid, file.clusters.len() as u32, FLAG_FRUSTUM_CULL);
+        let frame = renderer.render(&view, width, height)?;
+        write_png(out, frame.width, frame.height, &frame.rgba)?;
+        let times = frame
+            .times
+            .map(|t| format!("; GPU select {:.3} ms, expand {:.3} ms, draw {:.3} ms", t.select_ms, t.expand_ms, t.draw_ms))
+            .unwrap_or_default();
+        println!(
+            "screenshot: {} ({}x{}, eye {:?}, tau {} px): {} clusters, {} triangles{times}",
+            out.display(),
+            frame.width,
+            frame.height,
+            camera.eye,
+            args.tau,
+            frame.clusters,
+            frame.triangles
+        );
+    }
+
+    if args.verify {
+        let options = VerifyOptions {
+            selection_cameras: args.cameras,
+            crack_cameras: args.crack_cameras,
+            width,
+            height,
+            failure_dir: args.failure_dir.clone(),
+            ..VerifyOptions::default()
+        };
+        let started = std::time::Instant::now();
+        let report = verify(&mut renderer, &file, &scene, &options)?;
+        println!(
+            "selection: {} runs ({} cameras x {:?} px), {} mismatched runs, {} mismatched clusters, {} lists with duplicates; {} clusters selected per run (min..max {}..{})",
+            report.selection_runs,
+            options.selection_cameras,
+            options.taus,
+            report.selection_mismatched_runs,
+            report.selection_mismatched_clusters,
+            report.duplicate_lists,
+            if report.selection_runs > 0 { "" } else { "no" },
+            report.min_selected,
+            report.max_selected
+        );
+        println!(
+            "projected errors: {} values compared bit for bit with the CPU, {} differ",
+            report.projected_compared, report.projected_differences
+        );
+        for d in &report.disagreements {
+            println!("  disagreement: {}", d.to_json());
+        }
+        println!(
+            "cracks: {} renders ({} cameras x {:?} px, {}x{}), max flagged pixels {}, renders with flagged pixels {}, min model pixels {}",
+            report.crack_renders,
+            options.crack_cameras,
+            options.crack_taus,
+            width,
+            height,
+            report.max_flagged_pixels,
+            report.flagged_renders,
+            report.min_model_pixels
+        );
+        println!("verify time: {:.1} s", started.elapsed().as_secs_f64());
+        ok &= report.passed();
+        report_json["verify"] = report.to_json();
+    }
+
+    // Destroy everything first so that messages about destruction are counted too.
+    drop(renderer);
+    drop(device);
+    if args.validate {
+        println!("validation messages: {} errors, {} warnings", counts.errors(), counts.warnings());
+        ok &= counts.errors() == 0 && counts.warnings() == 0;
+        report_json["validation"] =
+            json!({"errors": counts.errors(), "warnings": counts.warnings(), "first": counts.first_messages()});
+    }
+    report_json["passed"] = json!(ok);
+    if let Some(path) = &args.report {
+        std::fs::write(path, serde_json::to_string_pretty(&report_json)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    if args.verify || args.validate {
+        println!("{}", if ok { "PASS" } else { "FAIL" });
+    }
+    Ok(if ok { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
+fn main() -> ExitCode {
+    match run(Args::parse()) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("preview: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,173 @@
+//! The GPU inputs of one `.mres` file, built on the CPU: the flattened hierarchy (one
+//! [`GpuCluster`] per cluster) and every decompressed page as is (FORMAT.md §5) with a table
+//! of page base offsets.
+
+use anyhow::{bail, Context as _, Result};
+use formats::mres::{Grid, MresFile, Sphere, NO_GROUP};
+
+use crate::gpu_types::GpuCluster;
+
+/// Largest cluster index an index-buffer entry `(cluster << 8) | vertex` can carry.
+pub const MAX_CLUSTERS: usize = 1 << 24;
+
+/// What the GPU needs of a file.
+#[derive(Clone, Debug)]
+pub struct SceneData {
+    /// One record per cluster, in file order.
+    pub clusters: Vec<GpuCluster>,
+    /// Byte offset of each page in [`SceneData::pages`] (multiples of 4).
+    pub page_bases: Vec<u32>,
+    /// All decompressed pages, each padded to a multiple of 4 bytes.
+    pub pages: Vec<u8>,
+    /// Indices of all clusters together: an upper bound on any cut's index count, since a
+    /// cut selects each cluster at most once.
+    pub index_capacity: u64,
+    /// The position grid.
+    pub grid: Grid,
+    /// A sphere enclosing the root groups' spheres (or all groups' without a root), object
+    /// space. Group spheres are conservative, so this can be much larger than the model.
+    pub root_bounds: Sphere,
+    /// A sphere enclosing every level-0 vertex (centred on their bounding box), object space:
+    /// an eye outside it is outside the mesh. Cameras frame this one.
+    pub bounds: Sphere,
+    /// Triangles of the finest (level-0) clusters.
+    pub level0_triangles: u64,
+}
+
+impl SceneData {
+    /// Flattens `file`'s hierarchy and reads every page. Every cluster is decoded once with the
+    /// reference reader, which checks each block offset, bit width and local index, so the
+    /// shaders only ever read inside the page buffer.
+    pub fn from_file(file: &MresFile) -> Result<SceneData> {
+        if file.clusters.len() >= MAX_CLUSTERS {
+            bail!("{} clusters: the fallback index encoding holds at most {}", file.clusters.len(), MAX_CLUSTERS - 1);
+        }
+        let mut pages = Vec::new();
+        let mut page_bases = Vec::with_capacity(file.pages.len());
+        let mut level0_positions = Vec::new();
+        for (p, info) in file.pages.iter().enumerate() {
+            let raw = file.page(p as u32).with_context(|| format!("page {p}"))?;
+            for c in info.first_cluster..info.first_cluster + info.cluster_count {
+                let decoded = file.decode_cluster(&raw, c).with_context(|| format!("page {p}"))?;
+                if file.clusters[c as usize].own_group == NO_GROUP {
+                    level0_positions.extend(decoded.positions.iter().map(|&q| file.header.grid.decode(q)));
+                }
+            }
+            page_bases.push(u32::try_from(pages.len()).context("decompressed pages exceed 4 GiB")?);
+            pages.extend_from_slice(&raw);
+            pages.resize(pages.len().next_multiple_of(4), 0);
+        }
+        u32::try_from(pages.len()).context("decompressed pages exceed 4 GiB")?;
+
+        let mut clusters = Vec::with_capacity(file.clusters.len());
+        let mut index_capacity = 0u64;
+        let mut level0_triangles = 0u64;
+        for c in &file.clusters {
+            let parent = &file.groups[c.group as usize];
+            let (own_sphere, own_error) = if c.own_group == NO_GROUP {
+                level0_triangles += c.triangle_count as u64;
+                ([0.0; 4], 0.0)
+            } else {
+                let own = &file.groups[c.own_group as usize];
+                (sphere4(&own.sphere), own.error)
+            };
+            clusters.push(GpuCluster {
+                own_sphere,
+                parent_sphere: sphere4(&parent.sphere),
+                own_error,
+                parent_error: parent.error,
+                page: parent.page,
+                header_offset: c.page_offset,
+                vertex_count: c.vertex_count as u32,
+                triangle_count: c.triangle_count as u32,
+                pad0: 0,
+                pad1: 0,
+            });
+            index_capacity += 3 * c.triangle_count as u64;
+        }
+        Ok(SceneData {
+            clusters,
+            page_bases,
+            pages,
+            index_capacity,
+            grid: file.header.grid,
+            root_bounds: model_bounds(file),
+            bounds: points_bounds(&level0_positions).unwrap_or_else(|| model_bounds(file)),
+            level0_triangles,
+        })
+    }
+}
+
+fn sphere4(s: &Sphere) -> [f32; 4] {
+    [s.center[0], s.center[1], s.center[2], s.radius]
+}
+
+/// A sphere enclosing the root groups' spheres (all groups' when no group is a root).
+pub fn model_bounds(file: &MresFile) -> Sphere {
+    let roots: Vec<Sphere> = file.groups.iter().filter(|g| g.error.is_infinite()).map(|g| g.sphere).collect();
+    let spheres = if roots.is_empty() { file.groups.iter().map(|g| g.sphere).collect() } else { roots };
+    enclosing_sphere(&spheres)
+}
+
+/// A sphere around `points`, centred on their bounding box (None without points).
+pub fn points_bounds(points: &[[f32; 3]]) -> Option<Sphere> {
+    let first = *points.first()?;
+    let (mut lo, mut hi) = (first, first);
+    for p in points {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let c: [f64; 3] = std::array::from_fn(|k| (lo[k] as f64 + hi[k] as f64) * 0.5);
+    let r = points
+        .iter()
+        .map(|p| (0..3).map(|k| (p[k] as f64 - c[k]).powi(2)).sum::<f64>().sqrt())
+        .fold(0.0f64, f64::max);
+    Some(Sphere { center: c.map(|v| v as f32), radius: (r * 1.0001 + 1e-6) as f32 })
+}
+
+/// A sphere enclosing all `spheres` (not minimal: centred on the mean of their centres).
+pub fn enclosing_sphere(spheres: &[Sphere]) -> Sphere {
+    if spheres.is_empty() {
+        return Sphere { center: [0.0; 3], radius: 1.0 };
+    }
+    let n = spheres.len() as f64;
+    let mut c = [0.0f64; 3];
+    for s in spheres {
+        for k in 0..3 {
+            c[k] += s.center[k] as f64 / n;
+        }
+    }
+    let radius = spheres
+        .iter()
+        .map(|s| {
+            let d: f64 = (0..3).map(|k| (s.center[k] as f64 - c[k]).powi(2)).sum::<f64>().sqrt();
+            d + s.radius as f64
+        })
+        .fold(0.0f64, f64::max);
+    Sphere { center: [c[0] as f32, c[1] as f32, c[2] as f32], radius: (radius * 1.0001).max(1e-6) as f32 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn enclosing_sphere_contains_inputs() {
+        let s = [
+            Sphere { center: [0.0, 0.0, 0.0], radius: 1.0 },
+            Sphere { center: [4.0, 0.0, 0.0], radius: 0.5 },
+            Sphere { center: [0.0, -3.0, 1.0], radius: 2.0 },
+        ];
+        let e = enclosing_sphere(&s);
+        for x in &s {
+            let d = (0..3).map(|k| (x.center[k] - e.center[k]).powi(2)).sum::<f32>().sqrt();
+            assert!(d + x.radius <= e.radius, "{x:?} not inside {e:?}");
+        }
+        let pts = [[0.0, 0.0, 0.0], [2.0, 1.0, -1.0], [1.0, 3.0, 0.5]];
+        let b = points_bounds(&pts).unwrap();
+        assert!(pts.iter().all(|p| (0..3).map(|k| (p[k] - b.center[k]).powi(2)).sum::<f32>().sqrt() <= b.radius));
+        assert!(points_bounds(&[]).is_none());
+    }
+}

@@ -1,0 +1,300 @@
+//! Verify mode: proves that a file renders correctly through the GPU path.
+//!
+//! 1. **Selection.** For many cameras (inside and around the bounds) and several thresholds,
+//!    the GPU-selected cluster set must equal the CPU reference
+//!    (`formats::mres::select::view_cut`) exactly; frustum culling is off for this check. For
+//!    each camera the GPU's projected errors of every cluster are also compared bit for bit
+//!    with `select::projected_error`, which shows any arithmetic drift before it flips a choice.
+//! 2. **Cracks.** From cameras outside the bounds (so outside a closed mesh), the selected cut
+//!    is drawn with back faces in pure red; any red pixel is a hole or a T-junction.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use formats::mres::select::{projected_error, view_cut};
+use formats::mres::{MresFile, NO_GROUP};
+use serde_json::{json, Value};
+
+use crate::camera::{crack_eyes, selection_eyes, Camera};
+use crate::gpu_types::{FLAG_FRUSTUM_CULL, FLAG_WRITE_PROJECTED};
+use crate::image::{count_flagged, count_model, write_png};
+use crate::scene::SceneData;
+use crate::vk::Renderer;
+
+/// What verify mode checks and how hard.
+#[derive(Clone, Debug)]
+pub struct VerifyOptions {
+    /// Cameras of the selection check (each with every threshold of `taus`).
+    pub selection_cameras: usize,
+    /// Thresholds of the selection check, pixels.
+    pub taus: Vec<f32>,
+    /// Cameras of the crack test (each with every threshold of `crack_taus`).
+    pub crack_cameras: usize,
+    /// Thresholds of the crack test, pixels.
+    pub crack_taus: Vec<f32>,
+    /// Viewport size in pixels (the selection uses the height).
+    pub width: u32,
+    /// Viewport height in pixels.
+    pub height: u32,
+    /// Seed of the camera sets.
+    pub seed: u64,
+    /// Where to write the PNG of each crack render with flagged pixels (not written if None).
+    pub failure_dir: Option<PathBuf>,
+}
+
+impl Default for VerifyOptions {
+    /// 200 selection cameras × 4 thresholds, 16 crack cameras × 3 thresholds at 512×512.
+    fn default() -> VerifyOptions {
+        VerifyOptions {
+            selection_cameras: 200,
+            taus: vec![0.25, 1.0, 4.0, 16.0],
+            crack_cameras: 16,
+            crack_taus: vec![0.5, 2.0, 8.0],
+            width: 512,
+            height: 512,
+            seed: 0x6d72_6573,
+            failure_dir: None,
+        }
+    }
+}
+
+/// One cluster on which the GPU and the CPU disagree.
+#[derive(Clone, Debug)]
+pub struct Disagreement {
+    /// Camera index in the selection set.
+    pub camera: usize,
+    /// Its eye.
+    pub eye: [f32; 3],
+    /// Threshold, pixels (NaN for a projected-value difference that flipped no selection).
+    pub tau: f32,
+    /// Cluster index.
+    pub cluster: u32,
+    /// Selected by the GPU.
+    pub gpu_selected: bool,
+    /// Selected by the CPU reference.
+    pub cpu_selected: bool,
+    /// CPU (own, parent) projected errors.
+    pub cpu: [f32; 2],
+    /// GPU (own, parent) projected errors.
+    pub gpu: [f32; 2],
+}
+
+impl Disagreement {
+    /// The disagreement as JSON, with each f32 also as its bits.
+    pub fn to_json(&self) -> Value {
+        let bits = |v: [f32; 2]| json!([format!("{:e} ({:#010x})", v[0], v[0].to_bits()), format!("{:e} ({:#010x})", v[1], v[1].to_bits())]);
+        json!({
+            "camera": self.camera, "eye": self.eye, "tau": if self.tau.is_nan() { Value::Null } else { json!(self.tau) },
+            "cluster": self.cluster, "gpu_selected": self.gpu_selected, "cpu_selected": self.cpu_selected,
+            "cpu_projected": bits(self.cpu), "gpu_projected": bits(self.gpu),
+        })
+    }
+}
+
+/// Results of verify mode.
+#[derive(Clone, Debug, Default)]
+pub struct VerifyReport {
+    /// Selections compared (cameras × thresholds).
+    pub selection_runs: usize,
+    /// Runs whose GPU set differed from the CPU set.
+    pub selection_mismatched_runs: usize,
+    /// Clusters selected on one side only, summed over runs.
+    pub selection_mismatched_clusters: usize,
+    /// GPU lists with a cluster listed twice.
+    pub duplicate_lists: usize,
+    /// Largest selected set seen (clusters).
+    pub max_selected: usize,
+    /// Smallest selected set seen (clusters).
+    pub min_selected: usize,
+    /// Projected values compared (2 per cluster per camera).
+    pub projected_compared: u64,
+    /// Of those, how many differ in any bit from the CPU.
+    pub projected_differences: u64,
+    /// First disagreements (selection and projected values), at most 20.
+    pub disagreements: Vec<Disagreement>,
+    /// Crack renders made.
+    pub crack_renders: usize,
+    /// Most flagged (red, back-face) pixels in one render.
+    pub max_flagged_pixels: u64,
+    /// Renders with any flagged pixel.
+    pub flagged_renders: usize,
+    /// Fewest model pixels in one crack render (shows the model was in view).
+    pub min_model_pixels: u64,
+    /// The worst crack render: (eye, tau, flagged pixels).
+    pub worst_crack: Option<([f32; 3], f32, u64)>,
+}
+
+impl VerifyReport {
+    /// Whether every check passed: identical selections, bit-identical projected errors, no
+    /// duplicate list entries, no flagged pixel, the model in view in every crack render
+    /// (validation messages are judged by the caller).
+    pub fn passed(&self) -> bool {
+        self.selection_mismatched_runs == 0
+            && self.projected_differences == 0
+            && self.duplicate_lists == 0
+            && self.max_flagged_pixels == 0
+            && (self.crack_renders == 0 || self.min_model_pixels > 0)
+    }
+
+    /// The report as JSON.
+    pub fn to_json(&self) -> Value {
+        json!({
+            "passed": self.passed(),
+            "selection": {
+                "runs": self.selection_runs,
+                "mismatched_runs": self.selection_mismatched_runs,
+                "mismatched_clusters": self.selection_mismatched_clusters,
+                "duplicate_lists": self.duplicate_lists,
+                "min_selected": self.min_selected,
+                "max_selected": self.max_selected,
+                "projected_compared": self.projected_compared,
+                "projected_differences": self.projected_differences,
+            },
+            "disagreements": self.disagreements.iter().map(Disagreement::to_json).collect::<Vec<_>>(),
+            "cracks": {
+                "renders": self.crack_renders,
+                "max_flagged_pixels": self.max_flagged_pixels,
+                "flagged_renders": self.flagged_renders,
+                "min_model_pixels": self.min_model_pixels,
+                "worst": self.worst_crack.map(|(eye, tau, n)| json!({"eye": eye, "tau": tau, "flagged": n})),
+            },
+        })
+    }
+}
+
+fn cpu_projected(file: &MresFile, view: &formats::mres::ViewParams) -> Vec<[f32; 2]> {
+    file.clusters
+        .iter()
+        .map(|c| {
+            let parent = &file.groups[c.group as usize];
+            let own = if c.own_group == NO_GROUP {
+                0.0
+            } else {
+                let g = &file.groups[c.own_group as usize];
+                projected_error(view, &g.sphere, g.error)
+            };
+            [own, projected_error(view, &parent.sphere, parent.error)]
+        })
+        .collect()
+}
+
+/// Runs the selection check and the crack test.
+pub fn verify(renderer: &mut Renderer, file: &MresFile, scene: &SceneData, options: &VerifyOptions) -> Result<VerifyReport> {
+    let mut report = VerifyReport { min_selected: usize::MAX, min_model_pixels: u64::MAX, ..Default::default() };
+    let bounds = scene.bounds;
+    let n = file.clusters.len() as u32;
+
+    for (ci, eye) in selection_eyes(&bounds, options.selection_cameras, options.seed).into_iter().enumerate() {
+        let camera = Camera::looking_at(eye, &bounds, options.width, options.height);
+        let params = camera.view_params();
+        let cpu_values = cpu_projected(file, &params);
+        for (ti, &tau) in options.taus.iter().enumerate() {
+            let flags = if ti == 0 { FLAG_WRITE_PROJECTED } else { 0 };
+            let selection = renderer.select(&camera.gpu_view(tau, &scene.grid, n, flags))?;
+            let mut gpu = selection.visible;
+            gpu.sort_unstable();
+            let listed = gpu.len();
+            gpu.dedup();
+            if gpu.len() != listed {
+                report.duplicate_lists += 1;
+            }
+            if ti == 0 {
+                for (c, (g, cv)) in selection.projected.iter().zip(&cpu_values).enumerate() {
+                    report.projected_compared += 2;
+                    let differs = (0..2).filter(|&k| g[k].to_bits() != cv[k].to_bits()).count() as u64;
+                    if differs > 0 {
+                        report.projected_differences += differs;
+                        if report.disagreements.len() < 20 {
+                            report.disagreements.push(Disagreement {
+                                camera: ci,
+                                eye,
+                                tau: f32::NAN,
+                                cluster: c as u32,
+                                gpu_selected: false,
+                                cpu_selected: false,
+                                cpu: *cv,
+                                gpu: *g,
+                            });
+                        }
+                    }
+                }
+            }
+            let cpu = view_cut(&file.groups, &file.clusters, &params, tau);
+            report.selection_runs += 1;
+            report.max_selected = report.max_selected.max(cpu.len());
+            report.min_selected = report.min_selected.min(cpu.len());
+            if cpu != gpu {
+                report.selection_mismatched_runs += 1;
+                let (mut i, mut j) = (0, 0);
+                let mut diff = Vec::new();
+                while i < cpu.len() || j < gpu.len() {
+                    match (cpu.get(i), gpu.get(j)) {
+                        (Some(a), Some(b)) if a == b => {
+                            i += 1;
+                            j += 1;
+                        }
+                        (Some(a), b) if b.is_none_or(|b| a < b) => {
+                            diff.push((*a, false, true));
+                            i += 1;
+                        }
+                        (_, Some(b)) => {
+                            diff.push((*b, true, false));
+                            j += 1;
+                        }
+                        _ => break,
+                    }
+                }
+                report.selection_mismatched_clusters += diff.len();
+                // Ask the GPU for its projected values of this camera to report both sides.
+                let gpu_values = if ti == 0 {
+                    selection.projected.clone()
+                } else {
+                    renderer.select(&camera.gpu_view(tau, &scene.grid, n, FLAG_WRITE_PROJECTED))?.projected
+                };
+                for (cluster, gpu_selected, cpu_selected) in diff {
+                    if report.disagreements.len() < 20 {
+                        report.disagreements.push(Disagreement {
+                            camera: ci,
+                            eye,
+                            tau,
+                            cluster,
+                            gpu_selected,
+                            cpu_selected,
+                            cpu: cpu_values[cluster as usize],
+                            gpu: gpu_values.get(cluster as usize).copied().unwrap_or([f32::NAN; 2]),
+                        });
+                    }
+                }
+            }
+        }
+    }
+    if report.selection_runs == 0 {
+        report.min_selected = 0;
+    }
+
+    for (ci, eye) in crack_eyes(&bounds, options.crack_cameras, options.seed ^ 0xc4ac).into_iter().enumerate() {
+        let camera = Camera::looking_at(eye, &bounds, options.width, options.height);
+        for &tau in &options.crack_taus {
+            let frame = renderer.render(&camera.gpu_view(tau, &scene.grid, n, FLAG_FRUSTUM_CULL), options.width, options.height)?;
+            let flagged = count_flagged(&frame.rgba);
+            let model = count_model(&frame.rgba);
+            report.crack_renders += 1;
+            report.min_model_pixels = report.min_model_pixels.min(model);
+            if flagged > 0 {
+                report.flagged_renders += 1;
+                if let Some(dir) = &options.failure_dir {
+                    std::fs::create_dir_all(dir)?;
+                    write_png(&dir.join(format!("crack_cam{ci}_tau{tau}.png")), frame.width, frame.height, &frame.rgba)?;
+                }
+            }
+            if flagged > report.max_flagged_pixels || report.worst_crack.is_none() {
+                report.max_flagged_pixels = report.max_flagged_pixels.max(flagged);
+                report.worst_crack = Some((eye, tau, flagged));
+            }
+        }
+    }
+    if report.crack_renders == 0 {
+        report.min_model_pixels = 0;
+    }
+    Ok(report)
+}

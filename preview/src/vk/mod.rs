@@ -1,0 +1,11 @@
+//! Every `unsafe` Vulkan call of the preview lives in this module tree. Each Vulkan object has
+//! a small owner type whose `Drop` destroys only its own handle; owners hold an `Arc` of the
+//! device (which holds the instance), and [`Device`]'s `Drop` waits idle before destroying it,
+//! so handles always go before their parents.
+
+mod context;
+mod renderer;
+mod resources;
+
+pub use context::{validation_available, ContextOptions, Device, DeviceInfo, MessageCounts};
+pub use renderer::{Frame, PassTimes, Renderer, RendererOptions, Selection, CLEAR_RGBA};

@@ -1,0 +1,676 @@
+//! The GPU side of the preview: buffers of one file, the pipelines, and the recording of the
+//! two passes (selection; selection + expansion + draw). Public methods are safe: each records
+//! one command buffer, submits it and waits for its fence before returning.
+
+use std::sync::Arc;
+
+use anyhow::{bail, Context as _, Result};
+use ash::vk;
+use bytemuck::{bytes_of, cast_slice};
+
+use super::context::Device;
+use super::resources::{
+    subresource_range, Buffer, CommandPool, DescriptorPool, DescriptorSetLayout, Fence, Image, Location, Pipeline,
+    PipelineLayout, QueryPool, ShaderModule,
+};
+use crate::gpu_types::{GpuCounters, GpuView, DISPATCH_ARGS_OFFSET, DRAW_ARGS_OFFSET};
+use crate::scene::SceneData;
+
+const SELECT_SPV: &[u8] = include_bytes!("../../shaders/select.comp.spv");
+const SELECT_NAIVE_SPV: &[u8] = include_bytes!("../../shaders/select_naive.comp.spv");
+const EXPAND_SPV: &[u8] = include_bytes!("../../shaders/expand.comp.spv");
+const DRAW_VERT_SPV: &[u8] = include_bytes!("../../shaders/draw.vert.spv");
+const DRAW_FRAG_SPV: &[u8] = include_bytes!("../../shaders/draw.frag.spv");
+
+/// Colour attachment format; the read-back bytes are RGBA8.
+pub const COLOR_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
+const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
+/// Background colour (never pure red).
+pub const CLEAR_RGBA: [f32; 4] = [0.16, 0.18, 0.22, 1.0];
+const SELECT_GROUP_SIZE: u32 = 64;
+const TIMESTAMPS: u32 = 4;
+
+/// The result of a selection pass.
+#[derive(Clone, Debug, Default)]
+pub struct Selection {
+    /// Visible clusters, in the order the GPU appended them.
+    pub visible: Vec<u32>,
+    /// (own, parent) projected errors of every cluster, when asked for.
+    pub projected: Vec<[f32; 2]>,
+}
+
+/// GPU time of each pass of one frame, in milliseconds (absent without timestamp support).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PassTimes {
+    /// Cluster selection.
+    pub select_ms: f64,
+    /// Index expansion.
+    pub expand_ms: f64,
+    /// Rasterization (both draws).
+    pub draw_ms: f64,
+}
+
+/// One rendered frame, read back.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// RGBA8 pixels, row by row from the top.
+    pub rgba: Vec<u8>,
+    /// Clusters drawn.
+    pub clusters: u32,
+    /// Triangles drawn.
+    pub triangles: u32,
+    /// GPU pass times, where the queue has timestamps.
+    pub times: Option<PassTimes>,
+}
+
+struct RenderTarget {
+    color: Image,
+    depth: Image,
+    readback: Buffer,
+}
+
+/// Choices made when a [`Renderer`] is built.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RendererOptions {
+    /// Diagnostic: select with the driver's own f32 division and sqrt instead of the exact
+    /// (f64-corrected) ones, to measure how far a device is from FORMAT.md §6.
+    pub naive_arithmetic: bool,
+}
+
+/// A file's GPU buffers plus the pipelines that select and draw it.
+pub struct Renderer {
+    device: Arc<Device>,
+    cluster_count: u32,
+    _clusters: Buffer,
+    _page_bases: Buffer,
+    _pages: Buffer,
+    view: Buffer,
+    counters: Buffer,
+    visible: Buffer,
+    indices: Buffer,
+    projected: Buffer,
+    readback_counters: Buffer,
+    readback_visible: Buffer,
+    readback_projected: Buffer,
+    target: Option<RenderTarget>,
+    _set_layout: DescriptorSetLayout,
+    pipeline_layout: PipelineLayout,
+    _descriptor_pool: DescriptorPool,
+    set: vk::DescriptorSet,
+    select: Pipeline,
+    expand: Pipeline,
+    draw_front: Pipeline,
+    draw_back: Pipeline,
+    _command_pool: CommandPool,
+    cmd: vk::CommandBuffer,
+    fence: Fence,
+    queries: Option<QueryPool>,
+}
+
+impl Drop for Renderer {
+    fn drop(&mut self) {
+        // SAFETY: waiting idle on a live device; afterwards no GPU work uses the owners, which
+        // then drop (in field order) before the last Arc of the device can.
+        unsafe {
+            let _ = self.device.raw.device_wait_idle();
+        }
+    }
+}
+
+impl Renderer {
+    /// Uploads `scene` and builds the pipelines.
+    pub fn new(device: &Arc<Device>, scene: &SceneData, options: RendererOptions) -> Result<Renderer> {
+        use vk::BufferUsageFlags as U;
+        let limit = device.info.max_storage_buffer_range as u64;
+        let too_big = |what: &str, bytes: u64| -> Result<()> {
+            if bytes > limit {
+                bail!("{what}: {bytes} bytes exceed this device's maxStorageBufferRange ({limit})");
+            }
+            Ok(())
+        };
+        too_big("decompressed pages", scene.pages.len() as u64)?;
+        too_big("index buffer", scene.index_capacity * 4)?;
+        too_big("cluster records", scene.clusters.len() as u64 * 64)?;
+        let cluster_count = scene.clusters.len() as u32;
+        let n = cluster_count.max(1) as u64;
+
+        let mut uploads = Vec::new();
+        let clusters = gpu_buffer(device, cast_slice(&scene.clusters), U::STORAGE_BUFFER, &mut uploads)?;
+        let page_bases = gpu_buffer(device, cast_slice(&scene.page_bases), U::STORAGE_BUFFER, &mut uploads)?;
+        let pages = gpu_buffer(device, &scene.pages, U::STORAGE_BUFFER, &mut uploads)?;
+        let view = Buffer::new(device, std::mem::size_of::<GpuView>() as u64, U::UNIFORM_BUFFER, Location::Upload)?;
+        let counters = Buffer::new(
+            device,
+            std::mem::size_of::<GpuCounters>() as u64,
+            U::STORAGE_BUFFER | U::INDIRECT_BUFFER | U::TRANSFER_DST | U::TRANSFER_SRC,
+            Location::Gpu,
+        )?;
+        let visible = Buffer::new(device, n * 4, U::STORAGE_BUFFER | U::TRANSFER_SRC, Location::Gpu)?;
+        let indices = Buffer::new(device, scene.index_capacity * 4, U::STORAGE_BUFFER | U::INDEX_BUFFER, Location::Gpu)?;
+        let projected = Buffer::new(device, n * 8, U::STORAGE_BUFFER | U::TRANSFER_SRC, Location::Gpu)?;
+        let readback_counters =
+            Buffer::new(device, std::mem::size_of::<GpuCounters>() as u64, U::TRANSFER_DST, Location::Readback)?;
+        let readback_visible = Buffer::new(device, n * 4, U::TRANSFER_DST, Location::Readback)?;
+        let readback_projected = Buffer::new(device, n * 8, U::TRANSFER_DST, Location::Readback)?;
+
+        // Descriptor set: 0 view (uniform), 1 clusters, 2 page bases, 3 pages, 4 counters,
+        // 5 visible, 6 indices, 7 projected (storage); the same for every pipeline.
+        let storage = [&clusters, &page_bases, &pages, &counters, &visible, &indices, &projected];
+        let mut bindings = vec![vk::DescriptorSetLayoutBinding::default()
+            .binding(0)
+            .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
+            .descriptor_count(1)
+            .stage_flags(vk::ShaderStageFlags::ALL)];
+        for b in 1..=storage.len() as u32 {
+            bindings.push(
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::ALL),
+            );
+        }
+        // SAFETY: object creation from valid create infos; each handle goes straight into its
+        // owner. Descriptor writes reference live buffers owned by the returned Renderer.
+        let (set_layout, pipeline_layout, descriptor_pool, set, command_pool, cmd, fence, queries) = unsafe {
+            let set_layout = DescriptorSetLayout::from_raw(
+                device,
+                device.raw.create_descriptor_set_layout(
+                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                    None,
+                )?,
+            );
+            let layouts = [set_layout.raw];
+            let pipeline_layout = PipelineLayout::from_raw(
+                device,
+                device.raw.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&layouts), None)?,
+            );
+            let sizes = [
+                vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: 1 },
+                vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: storage.len() as u32 },
+            ];
+            let descriptor_pool = DescriptorPool::from_raw(
+                device,
+                device
+                    .raw
+                    .create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)?,
+            );
+            let set = device.raw.allocate_descriptor_sets(
+                &vk::DescriptorSetAllocateInfo::default().descriptor_pool(descriptor_pool.raw).set_layouts(&layouts),
+            )?[0];
+            let infos: Vec<[vk::DescriptorBufferInfo; 1]> = std::iter::once(&view)
+                .chain(storage.iter().copied())
+                .map(|b| [vk::DescriptorBufferInfo { buffer: b.raw, offset: 0, range: vk::WHOLE_SIZE }])
+                .collect();
+            let writes: Vec<vk::WriteDescriptorSet> = infos
+                .iter()
+                .enumerate()
+                .map(|(i, info)| {
+                    vk::WriteDescriptorSet::default()
+                        .dst_set(set)
+                        .dst_binding(i as u32)
+                        .descriptor_type(if i == 0 {
+                            vk::DescriptorType::UNIFORM_BUFFER
+                        } else {
+                            vk::DescriptorType::STORAGE_BUFFER
+                        })
+                        .buffer_info(info)
+                })
+                .collect();
+            device.raw.update_descriptor_sets(&writes, &[]);
+            let command_pool = CommandPool::from_raw(
+                device,
+                device.raw.create_command_pool(
+                    &vk::CommandPoolCreateInfo::default()
+                        .queue_family_index(device.queue_family)
+                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER),
+                    None,
+                )?,
+            );
+            let cmd = device.raw.allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(command_pool.raw)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            )?[0];
+            let fence = Fence::from_raw(device, device.raw.create_fence(&vk::FenceCreateInfo::default(), None)?);
+            let queries = if device.info.timestamps {
+                Some(QueryPool::from_raw(
+                    device,
+                    device.raw.create_query_pool(
+                        &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(TIMESTAMPS),
+                        None,
+                    )?,
+                ))
+            } else {
+                None
+            };
+            (set_layout, pipeline_layout, descriptor_pool, set, command_pool, cmd, fence, queries)
+        };
+
+        let select =
+            compute_pipeline(device, &pipeline_layout, if options.naive_arithmetic { SELECT_NAIVE_SPV } else { SELECT_SPV })?;
+        let expand = compute_pipeline(device, &pipeline_layout, EXPAND_SPV)?;
+        let draw_front = draw_pipeline(device, &pipeline_layout, false)?;
+        let draw_back = draw_pipeline(device, &pipeline_layout, true)?;
+
+        let renderer = Renderer {
+            device: device.clone(),
+            cluster_count,
+            _clusters: clusters,
+            _page_bases: page_bases,
+            _pages: pages,
+            view,
+            counters,
+            visible,
+            indices,
+            projected,
+            readback_counters,
+            readback_visible,
+            readback_projected,
+            target: None,
+            _set_layout: set_layout,
+            pipeline_layout,
+            _descriptor_pool: descriptor_pool,
+            set,
+            select,
+            expand,
+            draw_front,
+            draw_back,
+            _command_pool: command_pool,
+            cmd,
+            fence,
+            queries,
+        };
+        // Copy the staged data into the device-local buffers.
+        if !uploads.is_empty() {
+            renderer.submit(|dev, cmd| {
+                for (staging, dst) in &uploads {
+                    let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: staging.size }];
+                    // SAFETY: both buffers are live and large enough; recording in `cmd`.
+                    unsafe { dev.cmd_copy_buffer(cmd, staging.raw, *dst, &region) };
+                }
+            })?;
+        }
+        drop(uploads);
+        Ok(renderer)
+    }
+
+    /// The device this renderer runs on.
+    pub fn device(&self) -> &Arc<Device> {
+        &self.device
+    }
+
+    /// Runs the selection pass for `view` and reads back the visible list (and, with
+    /// `FLAG_WRITE_PROJECTED` in `view.flags`, every cluster's projected errors).
+    pub fn select(&mut self, view: &GpuView) -> Result<Selection> {
+        let view = self.prepare_view(view)?;
+        let want_projected = view.flags & crate::gpu_types::FLAG_WRITE_PROJECTED != 0;
+        let n = self.cluster_count.max(1) as u64;
+        self.submit(|dev, cmd| {
+            // SAFETY: recording into `cmd` with buffers owned by `self`.
+            unsafe {
+                self.record_select(dev, cmd);
+                barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
+                    vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_READ);
+                let size = std::mem::size_of::<GpuCounters>() as u64;
+                dev.cmd_copy_buffer(cmd, self.counters.raw, self.readback_counters.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size }]);
+                dev.cmd_copy_buffer(cmd, self.visible.raw, self.readback_visible.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: n * 4 }]);
+                if want_projected {
+                    dev.cmd_copy_buffer(cmd, self.projected.raw, self.readback_projected.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: n * 8 }]);
+                }
+                barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
+                    vk::PipelineStageFlags2::HOST, vk::AccessFlags2::HOST_READ);
+            }
+        })?;
+        let counters = self.read_counters()?;
+        if counters.visible_count > self.cluster_count {
+            bail!("GPU reported {} visible clusters of {}", counters.visible_count, self.cluster_count);
+        }
+        let visible: Vec<u32> = cast_slice::<u8, u32>(&self.readback_visible.read(counters.visible_count as usize * 4)?).to_vec();
+        let projected = if want_projected {
+            cast_slice::<u8, [f32; 2]>(&self.readback_projected.read(self.cluster_count as usize * 8)?).to_vec()
+        } else {
+            Vec::new()
+        };
+        Ok(Selection { visible, projected })
+    }
+
+    /// Selects, expands and draws the clusters for `view` into a `width` × `height` image and
+    /// reads it back. Front faces are shaded, back faces pure red (the crack test's flag).
+    pub fn render(&mut self, view: &GpuView, width: u32, height: u32) -> Result<Frame> {
+        self.prepare_view(view)?;
+        self.ensure_target(width, height)?;
+        let target = self.target.as_ref().context("render target")?;
+        let extent = target.color.extent;
+        self.submit(|dev, cmd| {
+            // SAFETY: recording into `cmd` with resources owned by `self`; layouts are
+            // transitioned from UNDEFINED each frame (contents are cleared anyway).
+            unsafe {
+                if let Some(q) = &self.queries {
+                    dev.cmd_reset_query_pool(cmd, q.raw, 0, TIMESTAMPS);
+                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::TOP_OF_PIPE, q.raw, 0);
+                }
+                self.record_select(dev, cmd);
+                barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
+                    vk::PipelineStageFlags2::COMPUTE_SHADER | vk::PipelineStageFlags2::DRAW_INDIRECT,
+                    vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE | vk::AccessFlags2::INDIRECT_COMMAND_READ);
+                if let Some(q) = &self.queries {
+                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 1);
+                }
+                dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.expand.raw);
+                dev.cmd_dispatch_indirect(cmd, self.counters.raw, DISPATCH_ARGS_OFFSET);
+                barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
+                    vk::PipelineStageFlags2::DRAW_INDIRECT | vk::PipelineStageFlags2::INDEX_INPUT | vk::PipelineStageFlags2::VERTEX_SHADER,
+                    vk::AccessFlags2::INDIRECT_COMMAND_READ | vk::AccessFlags2::INDEX_READ | vk::AccessFlags2::SHADER_READ);
+                if let Some(q) = &self.queries {
+                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 2);
+                }
+                let to_attachment = [
+                    image_barrier(&target.color, vk::ImageAspectFlags::COLOR,
+                        vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT, vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+                        vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
+                    image_barrier(&target.depth, vk::ImageAspectFlags::DEPTH,
+                        vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS,
+                        vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                        vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL),
+                ];
+                dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_attachment));
+                let color = [vk::RenderingAttachmentInfo::default()
+                    .image_view(target.color.view)
+                    .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                    .load_op(vk::AttachmentLoadOp::CLEAR)
+                    .store_op(vk::AttachmentStoreOp::STORE)
+                    .clear_value(vk::ClearValue { color: vk::ClearColorValue { float32: CLEAR_RGBA } })];
+                let depth = vk::RenderingAttachmentInfo::default()
+                    .image_view(target.depth.view)
+                    .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+                    .load_op(vk::AttachmentLoadOp::CLEAR)
+                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                    .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } });
+                let area = vk::Rect2D { offset: vk::Offset2D { x: 0, y: 0 }, extent };
+                dev.cmd_begin_rendering(cmd, &vk::RenderingInfo::default()
+                    .render_area(area)
+                    .layer_count(1)
+                    .color_attachments(&color)
+                    .depth_attachment(&depth));
+                // Negative height: y up, as in the projection (Vulkan 1.1 core).
+                dev.cmd_set_viewport(cmd, 0, &[vk::Viewport {
+                    x: 0.0,
+                    y: extent.height as f32,
+                    width: extent.width as f32,
+                    height: -(extent.height as f32),
+                    min_depth: 0.0,
+                    max_depth: 1.0,
+                }]);
+                dev.cmd_set_scissor(cmd, 0, &[area]);
+                dev.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT32);
+                for pipeline in [&self.draw_front, &self.draw_back] {
+                    dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
+                    dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout.raw, 0, &[self.set], &[]);
+                    dev.cmd_draw_indexed_indirect(cmd, self.counters.raw, DRAW_ARGS_OFFSET, 1, 20);
+                }
+                dev.cmd_end_rendering(cmd);
+                if let Some(q) = &self.queries {
+                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 3);
+                }
+                let to_copy = [vk::ImageMemoryBarrier2::default()
+                    .src_stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)
+                    .src_access_mask(vk::AccessFlags2::COLOR_ATTACHMENT_WRITE)
+                    .dst_stage_mask(vk::PipelineStageFlags2::COPY)
+                    .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
+                    .old_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+                    .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
+                    .image(target.color.raw)
+                    .subresource_range(subresource_range(vk::ImageAspectFlags::COLOR))];
+                dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_copy));
+                let region = [vk::BufferImageCopy {
+                    buffer_offset: 0,
+                    buffer_row_length: 0,
+                    buffer_image_height: 0,
+                    image_subresource: vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::COLOR, mip_level: 0, base_array_layer: 0, layer_count: 1 },
+                    image_offset: vk::Offset3D { x: 0, y: 0, z: 0 },
+                    image_extent: vk::Extent3D { width: extent.width, height: extent.height, depth: 1 },
+                }];
+                dev.cmd_copy_image_to_buffer(cmd, target.color.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, target.readback.raw, &region);
+                // The counters were last read as indirect arguments.
+                barrier(dev, cmd, vk::PipelineStageFlags2::DRAW_INDIRECT, vk::AccessFlags2::INDIRECT_COMMAND_READ,
+                    vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_READ);
+                let size = std::mem::size_of::<GpuCounters>() as u64;
+                dev.cmd_copy_buffer(cmd, self.counters.raw, self.readback_counters.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size }]);
+                barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
+                    vk::PipelineStageFlags2::HOST, vk::AccessFlags2::HOST_READ);
+            }
+        })?;
+        let counters = self.read_counters()?;
+        let rgba = target.readback.read(extent.width as usize * extent.height as usize * 4)?;
+        let times = self.read_times()?;
+        Ok(Frame {
+            width: extent.width,
+            height: extent.height,
+            rgba,
+            clusters: counters.visible_count,
+            triangles: counters.index_count / 3,
+            times,
+        })
+    }
+
+    fn prepare_view(&self, view: &GpuView) -> Result<GpuView> {
+        let mut view = *view;
+        view.cluster_count = self.cluster_count;
+        view.max_groups = self.device.info.max_compute_groups_x.min(65535);
+        self.view.write(bytes_of(&view))?;
+        Ok(view)
+    }
+
+    fn read_counters(&self) -> Result<GpuCounters> {
+        let bytes = self.readback_counters.read(std::mem::size_of::<GpuCounters>())?;
+        Ok(bytemuck::pod_read_unaligned(&bytes))
+    }
+
+    fn read_times(&self) -> Result<Option<PassTimes>> {
+        let Some(q) = &self.queries else { return Ok(None) };
+        let mut ticks = [0u64; TIMESTAMPS as usize];
+        // SAFETY: the queries were written by the submission this call follows (fence waited).
+        unsafe { self.device.raw.get_query_pool_results(q.raw, 0, &mut ticks, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT) }?;
+        let ms = |a: usize, b: usize| ticks[b].wrapping_sub(ticks[a]) as f64 * self.device.info.timestamp_period_ns as f64 * 1e-6;
+        Ok(Some(PassTimes { select_ms: ms(0, 1), expand_ms: ms(1, 2), draw_ms: ms(2, 3) }))
+    }
+
+    fn ensure_target(&mut self, width: u32, height: u32) -> Result<()> {
+        let extent = vk::Extent2D { width, height };
+        if self.target.as_ref().is_some_and(|t| t.color.extent == extent) {
+            return Ok(());
+        }
+        if width == 0 || height == 0 || width > 16384 || height > 16384 {
+            bail!("image size {width}x{height} out of range (1..=16384)");
+        }
+        self.target = None;
+        let color = Image::new(&self.device, extent, COLOR_FORMAT,
+            vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC, vk::ImageAspectFlags::COLOR)?;
+        let depth = Image::new(&self.device, extent, DEPTH_FORMAT,
+            vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT, vk::ImageAspectFlags::DEPTH)?;
+        let readback = Buffer::new(&self.device, width as u64 * height as u64 * 4, vk::BufferUsageFlags::TRANSFER_DST, Location::Readback)?;
+        self.target = Some(RenderTarget { color, depth, readback });
+        Ok(())
+    }
+
+    /// Records the counter reset and the selection dispatch.
+    ///
+    /// # Safety
+    /// `cmd` must be in the recording state and belong to `dev` (this renderer's device).
+    unsafe fn record_select(&self, dev: &ash::Device, cmd: vk::CommandBuffer) {
+        let groups = self.cluster_count.div_ceil(SELECT_GROUP_SIZE).max(1);
+        let gx = groups.min(self.device.info.max_compute_groups_x.min(65535));
+        let gy = groups.div_ceil(gx);
+        // SAFETY: per this function's contract; all handles are owned by `self`.
+        unsafe {
+            // The counters are read as indirect arguments by the previous frame's commands,
+            // which completed before this submission (fence), and written below.
+            dev.cmd_update_buffer(cmd, self.counters.raw, 0, bytes_of(&GpuCounters::reset()));
+            barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
+                vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE);
+            dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.select.raw);
+            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline_layout.raw, 0, &[self.set], &[]);
+            dev.cmd_dispatch(cmd, gx, gy, 1);
+        }
+    }
+
+    /// Records `record` into the command buffer, submits it and waits for it to finish.
+    fn submit(&self, record: impl FnOnce(&ash::Device, vk::CommandBuffer)) -> Result<()> {
+        let dev = &self.device.raw;
+        // SAFETY: the command buffer is not in use (every submission is waited for before
+        // this returns); the fence is unsignalled (reset after each wait).
+        unsafe {
+            dev.reset_command_buffer(self.cmd, vk::CommandBufferResetFlags::empty())?;
+            dev.begin_command_buffer(self.cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
+            record(dev, self.cmd);
+            dev.end_command_buffer(self.cmd)?;
+            let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cmd)];
+            let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cmds)];
+            dev.queue_submit2(self.device.queue, &submit, self.fence.raw).context("vkQueueSubmit2")?;
+            dev.wait_for_fences(&[self.fence.raw], true, u64::MAX).context("vkWaitForFences")?;
+            dev.reset_fences(&[self.fence.raw])?;
+        }
+        Ok(())
+    }
+}
+
+/// A global memory barrier.
+///
+/// # Safety
+/// `cmd` must be recording, on `dev`.
+unsafe fn barrier(
+    dev: &ash::Device,
+    cmd: vk::CommandBuffer,
+    src_stage: vk::PipelineStageFlags2,
+    src_access: vk::AccessFlags2,
+    dst_stage: vk::PipelineStageFlags2,
+    dst_access: vk::AccessFlags2,
+) {
+    let b = [vk::MemoryBarrier2::default()
+        .src_stage_mask(src_stage)
+        .src_access_mask(src_access)
+        .dst_stage_mask(dst_stage)
+        .dst_access_mask(dst_access)];
+    // SAFETY: per this function's contract.
+    unsafe { dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().memory_barriers(&b)) };
+}
+
+/// A barrier that discards `image`'s contents and moves it to `layout` for `stage`/`access`.
+fn image_barrier<'a>(
+    image: &Image,
+    aspect: vk::ImageAspectFlags,
+    stage: vk::PipelineStageFlags2,
+    access: vk::AccessFlags2,
+    layout: vk::ImageLayout,
+) -> vk::ImageMemoryBarrier2<'a> {
+    vk::ImageMemoryBarrier2::default()
+        // The previous frame's copy (or attachment use) finished before this submission.
+        .src_stage_mask(stage | vk::PipelineStageFlags2::COPY)
+        .src_access_mask(vk::AccessFlags2::NONE)
+        .dst_stage_mask(stage)
+        .dst_access_mask(access)
+        .old_layout(vk::ImageLayout::UNDEFINED)
+        .new_layout(layout)
+        .image(image.raw)
+        .subresource_range(subresource_range(aspect))
+}
+
+/// A device-local buffer holding `data`: written directly where device memory is mapped,
+/// otherwise through a staging buffer pushed onto `uploads` (copied by the caller).
+fn gpu_buffer(
+    device: &Arc<Device>,
+    data: &[u8],
+    usage: vk::BufferUsageFlags,
+    uploads: &mut Vec<(Buffer, vk::Buffer)>,
+) -> Result<Buffer> {
+    let buffer = Buffer::new(device, data.len() as u64, usage | vk::BufferUsageFlags::TRANSFER_DST, Location::Gpu)?;
+    if buffer.is_mapped() {
+        buffer.write(data)?;
+    } else if !data.is_empty() {
+        let staging = Buffer::new(device, data.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, Location::Upload)?;
+        staging.write(data)?;
+        uploads.push((staging, buffer.raw));
+    }
+    Ok(buffer)
+}
+
+fn compute_pipeline(device: &Arc<Device>, layout: &PipelineLayout, spirv: &[u8]) -> Result<Pipeline> {
+    let module = ShaderModule::new(device, spirv)?;
+    let stage = vk::PipelineShaderStageCreateInfo::default()
+        .stage(vk::ShaderStageFlags::COMPUTE)
+        .module(module.raw)
+        .name(c"main");
+    let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout.raw)];
+    // SAFETY: valid module and layout; the pipeline goes into its owner.
+    unsafe {
+        let raw = device
+            .raw
+            .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
+            .map_err(|(_, e)| e)
+            .context("vkCreateComputePipelines")?[0];
+        Ok(Pipeline::from_raw(device, raw))
+    }
+}
+
+/// The fallback draw: no vertex input (the vertex shader decodes positions from the pages),
+/// reverse-Z depth test. `back_faces` draws only back faces, pushed slightly away (depth bias)
+/// so that front faces win every tie along silhouettes; otherwise only front faces.
+fn draw_pipeline(device: &Arc<Device>, layout: &PipelineLayout, back_faces: bool) -> Result<Pipeline> {
+    let vert = ShaderModule::new(device, DRAW_VERT_SPV)?;
+    let frag = ShaderModule::new(device, DRAW_FRAG_SPV)?;
+    let stages = [
+        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert.raw).name(c"main"),
+        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag.raw).name(c"main"),
+    ];
+    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
+    let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_LIST);
+    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
+    let raster = vk::PipelineRasterizationStateCreateInfo::default()
+        .polygon_mode(vk::PolygonMode::FILL)
+        .cull_mode(if back_faces { vk::CullModeFlags::FRONT } else { vk::CullModeFlags::BACK })
+        .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
+        .depth_bias_enable(back_faces)
+        .depth_bias_constant_factor(if back_faces { -16.0 } else { 0.0 })
+        .depth_bias_slope_factor(if back_faces { -2.0 } else { 0.0 })
+        .line_width(1.0);
+    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
+    let depth = vk::PipelineDepthStencilStateCreateInfo::default()
+        .depth_test_enable(true)
+        .depth_write_enable(true)
+        .depth_compare_op(vk::CompareOp::GREATER);
+    let blend_attachments = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
+    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
+    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
+    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
+    let color_formats = [COLOR_FORMAT];
+    let mut rendering = vk::PipelineRenderingCreateInfo::default()
+        .color_attachment_formats(&color_formats)
+        .depth_attachment_format(DEPTH_FORMAT);
+    let info = [vk::GraphicsPipelineCreateInfo::default()
+        .stages(&stages)
+        .vertex_input_state(&vertex_input)
+        .input_assembly_state(&assembly)
+        .viewport_state(&viewport)
+        .rasterization_state(&raster)
+        .multisample_state(&multisample)
+        .depth_stencil_state(&depth)
+        .color_blend_state(&blend)
+        .dynamic_state(&dynamic)
+        .layout(layout.raw)
+        .push_next(&mut rendering)];
+    // SAFETY: valid state structs and modules (alive until the call returns).
+    unsafe {
+        let raw = device
+            .raw
+            .create_graphics_pipelines(vk::PipelineCache::null(), &info, None)
+            .map_err(|(_, e)| e)
+            .context("vkCreateGraphicsPipelines")?[0];
+        Ok(Pipeline::from_raw(device, raw))
+    }
+}

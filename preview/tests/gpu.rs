@@ -1,0 +1,173 @@
+//! GPU tests on a small closed model written with the reference writer. Each skips (with a
+//! printed note) where no Vulkan device exists; where `VK_LAYER_KHRONOS_validation` is
+//! installed, it is on and any message fails the test.
+
+use std::sync::Arc;
+
+use formats::mres::{write_mres, Dag, DagCluster, Grid, Group, Header, MresFile, Sphere, UvQuant, NO_GROUP};
+use preview::camera::Camera;
+use preview::gpu_types::{FLAG_DROP_SOME, FLAG_FRUSTUM_CULL};
+use preview::image::count_flagged;
+use preview::scene::SceneData;
+use preview::verify::{verify, VerifyOptions};
+use preview::vk::{validation_available, ContextOptions, Device, MessageCounts, Renderer, RendererOptions};
+
+/// A closed cube: six n×n-quad faces (one level-0 cluster each) in one group with error 0.05,
+/// simplified into one 12-triangle root cluster. Faces share their edge vertices' grid
+/// coordinates, so both cuts are watertight.
+fn cube_dag(n: i32) -> Dag {
+    let mut clusters = Vec::new();
+    for axis in 0..3 {
+        for positive in [false, true] {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let mut positions = Vec::new();
+            for j in 0..=n {
+                for i in 0..=n {
+                    let mut q = [0; 3];
+                    q[axis] = if positive { n } else { 0 };
+                    q[u] = i;
+                    q[v] = j;
+                    positions.push(q);
+                }
+            }
+            let at = |i: i32, j: i32| (j * (n + 1) + i) as u8;
+            let mut indices = Vec::new();
+            for j in 0..n {
+                for i in 0..n {
+                    // Counter-clockwise seen from outside (+axis for the positive face).
+                    let quad = [[at(i, j), at(i + 1, j), at(i + 1, j + 1)], [at(i, j), at(i + 1, j + 1), at(i, j + 1)]];
+                    for t in quad {
+                        indices.extend(if positive { t } else { [t[0], t[2], t[1]] });
+                    }
+                }
+            }
+            clusters.push(DagCluster { group: 0, own_group: NO_GROUP, positions, normals: vec![], uvs: vec![], indices, materials: vec![] });
+        }
+    }
+    let corners: Vec<[i32; 3]> = (0..8).map(|c| [(c & 1) * n, ((c >> 1) & 1) * n, ((c >> 2) & 1) * n]).collect();
+    // The 12 triangles of the cube over `corners`, counter-clockwise from outside.
+    let faces = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
+    let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
+    clusters.push(DagCluster { group: 1, own_group: 0, positions: corners, normals: vec![], uvs: vec![], indices, materials: vec![] });
+    let step = 2.0 / n as f32;
+    let sphere = |r: f32| Sphere { center: [0.0; 3], radius: r };
+    Dag {
+        header: Header {
+            flags: 0,
+            grid: Grid { origin: [-1.0; 3], step },
+            uv: UvQuant { min: [0.0; 2], extent: [0.0; 2] },
+            normal_bits: 0,
+            position_bits: 16,
+            level_count: 0,
+            source_triangles: 12 * (n * n) as u64,
+        },
+        groups: vec![
+            Group { sphere: sphere(1.75), error: 0.05, level: 0, first_cluster: 0, cluster_count: 0, page: 0 },
+            Group { sphere: sphere(1.76), error: f32::INFINITY, level: 1, first_cluster: 0, cluster_count: 0, page: 0 },
+        ],
+        clusters,
+    }
+}
+
+fn cube_file() -> MresFile {
+    MresFile::parse(write_mres(&cube_dag(6), 3).expect("write")).expect("parse")
+}
+
+/// A device with validation where the layer exists, or None (and a note) without Vulkan.
+fn device(test: &str) -> Option<(Arc<Device>, Arc<MessageCounts>)> {
+    let validation = validation_available();
+    match Device::new(&ContextOptions { validation, ..Default::default() }) {
+        Ok(d) => {
+            println!("{test}: on {} (validation {})", d.info.name, if validation { "on" } else { "not installed" });
+            let counts = d.counts.clone();
+            Some((d, counts))
+        }
+        Err(e) => {
+            println!("{test}: SKIPPED, no Vulkan device: {e:#}");
+            None
+        }
+    }
+}
+
+fn assert_silent(counts: &MessageCounts) {
+    assert_eq!((counts.errors(), counts.warnings()), (0, 0), "validation messages: {:#?}", counts.first_messages());
+}
+
+#[test]
+fn gpu_selection_equals_cpu_and_the_closed_cube_shows_no_back_face() {
+    let Some((device, counts)) = device("verify") else { return };
+    let file = cube_file();
+    let scene = SceneData::from_file(&file).unwrap();
+    let mut renderer = Renderer::new(&device, &scene, RendererOptions::default()).unwrap();
+    let options = VerifyOptions { selection_cameras: 60, crack_cameras: 6, width: 128, height: 128, ..Default::default() };
+    let report = verify(&mut renderer, &file, &scene, &options).unwrap();
+    println!("{}", report.to_json());
+    assert!(report.passed(), "{:#?}", report.to_json());
+    assert_eq!(report.selection_runs, 240);
+    // Both cuts occur: the root cube (1 cluster) and the six faces.
+    assert_eq!((report.min_selected, report.max_selected), (1, 6));
+    assert!(report.min_model_pixels > 100);
+    drop(renderer);
+    drop(device);
+    assert_silent(&counts);
+}
+
+#[test]
+fn crack_test_sees_a_hole() {
+    let Some((device, counts)) = device("holes") else { return };
+    let file = cube_file();
+    let scene = SceneData::from_file(&file).unwrap();
+    let mut renderer = Renderer::new(&device, &scene, RendererOptions::default()).unwrap();
+    let (mut whole, mut holed) = (0, 0);
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let mut eye = [0.1, 0.2, 0.3];
+            eye[axis] = 3.0 * sign;
+            let camera = Camera::looking_at(eye, &scene.bounds, 96, 96);
+            // tau 0: every projected error exceeds it, so the six level-0 faces are drawn.
+            let frame = renderer.render(&camera.gpu_view(0.0, &scene.grid, 7, FLAG_FRUSTUM_CULL), 96, 96).unwrap();
+            assert_eq!(frame.clusters, 6);
+            whole += count_flagged(&frame.rgba);
+            let frame = renderer.render(&camera.gpu_view(0.0, &scene.grid, 7, FLAG_FRUSTUM_CULL | FLAG_DROP_SOME), 96, 96).unwrap();
+            assert_eq!(frame.clusters, 5);
+            holed += count_flagged(&frame.rgba);
+        }
+    }
+    assert_eq!(whole, 0);
+    // One face is missing: seen from its side, the inside (back faces) shows through.
+    assert!(holed > 1000, "only {holed} flagged pixels with a face dropped");
+    drop(renderer);
+    drop(device);
+    assert_silent(&counts);
+}
+
+#[test]
+fn command_line_verify_and_screenshot() {
+    if Device::new(&ContextOptions::default()).is_err() {
+        println!("cli: SKIPPED, no Vulkan device");
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("mres-preview-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mres = dir.join("cube.mres");
+    std::fs::write(&mres, write_mres(&cube_dag(6), 3).unwrap()).unwrap();
+    let png = dir.join("shot.png");
+    let report = dir.join("report.json");
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_preview"));
+    cmd.arg(&mres).args(["--headless", "--verify", "--cameras", "20", "--crack-cameras", "3", "--size", "160x120"]);
+    cmd.arg("--out").arg(&png).arg("--report").arg(&report);
+    if validation_available() {
+        cmd.arg("--validate");
+    }
+    let out = cmd.output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success());
+    assert!(stdout.contains("PASS"));
+    let png_bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&png_bytes[1..4], b"PNG");
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(json["passed"], true);
+    assert_eq!(json["verify"]["selection"]["runs"], 80);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
