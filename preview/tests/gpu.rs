@@ -73,15 +73,23 @@ fn cube_file() -> MresFile {
     MresFile::parse(write_mres(&cube_dag(6), 3).expect("write")).expect("parse")
 }
 
+/// Whether a Vulkan device and the validation layer are required (CI sets
+/// `MRES_PREVIEW_REQUIRE_GPU=1`, so that a missing driver fails instead of skipping).
+fn gpu_required() -> bool {
+    std::env::var("MRES_PREVIEW_REQUIRE_GPU").is_ok_and(|v| v == "1")
+}
+
 /// A device with validation where the layer exists, or None (and a note) without Vulkan.
 fn device(test: &str) -> Option<(Arc<Device>, Arc<MessageCounts>)> {
     let validation = validation_available();
+    assert!(validation || !gpu_required(), "MRES_PREVIEW_REQUIRE_GPU=1 but VK_LAYER_KHRONOS_validation is not installed");
     match Device::new(&ContextOptions { validation, ..Default::default() }) {
         Ok(d) => {
             println!("{test}: on {} (validation {})", d.info.name, if validation { "on" } else { "not installed" });
             let counts = d.counts.clone();
             Some((d, counts))
         }
+        Err(e) if gpu_required() => panic!("{test}: MRES_PREVIEW_REQUIRE_GPU=1 but no Vulkan device: {e:#}"),
         Err(e) => {
             println!("{test}: SKIPPED, no Vulkan device: {e:#}");
             None
@@ -143,7 +151,8 @@ fn crack_test_sees_a_hole() {
 
 #[test]
 fn command_line_verify_and_screenshot() {
-    if Device::new(&ContextOptions::default()).is_err() {
+    if let Err(e) = Device::new(&ContextOptions::default()) {
+        assert!(!gpu_required(), "MRES_PREVIEW_REQUIRE_GPU=1 but no Vulkan device: {e:#}");
         println!("cli: SKIPPED, no Vulkan device");
         return;
     }
@@ -170,4 +179,99 @@ fn command_line_verify_and_screenshot() {
     assert_eq!(json["passed"], true);
     assert_eq!(json["verify"]["selection"]["runs"], 80);
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The shade `draw.frag.glsl` gives a front face with unit normal `n` at `p` seen from `eye`.
+fn expected_shade(n: [f32; 3], p: [f32; 3], eye: [f32; 3]) -> [f32; 3] {
+    let t = [eye[0] - p[0], eye[1] - p[1], eye[2] - p[2]];
+    let l = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
+    let lambert = ((n[0] * t[0] + n[1] * t[1] + n[2] * t[2]) / l).abs();
+    [0.08 + 0.85 * lambert, 0.08 + 0.80 * lambert, 0.08 + 0.72 * lambert]
+}
+
+/// A CPU reference image of the cube `[-1, 1]^3` (the surface `cube_dag` describes): one ray per
+/// pixel centre, analytic intersection, the fragment shader's shading; background elsewhere.
+fn reference_cube_image(camera: &Camera) -> Vec<[f32; 3]> {
+    let (w, h) = (camera.width, camera.height);
+    let vm = camera.view_matrix();
+    // Rows of the view matrix: side, up, -forward.
+    let s = [vm[0][0], vm[1][0], vm[2][0]];
+    let u = [vm[0][1], vm[1][1], vm[2][1]];
+    let f = [-vm[0][2], -vm[1][2], -vm[2][2]];
+    let aspect = w as f32 / h as f32;
+    let bg = preview::vk::CLEAR_RGBA;
+    let mut out = Vec::with_capacity((w * h) as usize);
+    for y in 0..h {
+        for x in 0..w {
+            let nx = (2.0 * (x as f32 + 0.5) / w as f32 - 1.0) * aspect / camera.proj_y;
+            let ny = (1.0 - 2.0 * (y as f32 + 0.5) / h as f32) / camera.proj_y;
+            let d: [f32; 3] = std::array::from_fn(|k| s[k] * nx + u[k] * ny + f[k]);
+            // Slab test against the unit cube; the entry face gives the normal.
+            let (mut t0, mut t1, mut axis) = (f32::NEG_INFINITY, f32::INFINITY, 0);
+            for k in 0..3 {
+                let (a, b) = ((-1.0 - camera.eye[k]) / d[k], (1.0 - camera.eye[k]) / d[k]);
+                let (near, far) = (a.min(b), a.max(b));
+                if near > t0 {
+                    t0 = near;
+                    axis = k;
+                }
+                t1 = t1.min(far);
+            }
+            if t0 <= t1 && t0 > 0.0 {
+                let p: [f32; 3] = std::array::from_fn(|k| camera.eye[k] + d[k] * t0);
+                let mut n = [0.0; 3];
+                n[axis] = if d[axis] > 0.0 { -1.0 } else { 1.0 };
+                out.push(expected_shade(n, p, camera.eye));
+            } else {
+                out.push([bg[0], bg[1], bg[2]]);
+            }
+        }
+    }
+    out
+}
+
+/// (pixels differing by more than `tolerance` in any channel, mean absolute difference).
+fn image_difference(rgba: &[u8], reference: &[[f32; 3]], tolerance: f32) -> (usize, f32) {
+    let mut bad = 0;
+    let mut sum = 0.0;
+    for (p, r) in rgba.chunks_exact(4).zip(reference) {
+        let d = (0..3).map(|k| (p[k] as f32 / 255.0 - r[k]).abs()).fold(0.0f32, f32::max);
+        sum += d;
+        if d > tolerance {
+            bad += 1;
+        }
+    }
+    (bad, sum / reference.len() as f32)
+}
+
+/// Headless screenshots against a CPU reference image, with a tolerance (never golden bytes):
+/// colours within 3/255 except along silhouette edges, where rasterization rules and f32
+/// rounding decide pixel centres differently (at most 1% of the image); both cuts of the cube
+/// (six 72-triangle faces, or the 12-triangle root) must look the same.
+#[test]
+fn screenshot_matches_a_cpu_reference_image() {
+    let Some((device, counts)) = device("screenshot") else { return };
+    let file = cube_file();
+    let scene = SceneData::from_file(&file).unwrap();
+    let mut renderer = Renderer::new(&device, &scene, RendererOptions::default()).unwrap();
+    let (w, h) = (160, 120);
+    for eye in [[2.6, 1.7, 3.1], [-3.0, -2.2, 1.2], [0.4, 4.0, -0.3]] {
+        let camera = Camera::looking_at(eye, &scene.bounds, w, h);
+        let reference = reference_cube_image(&camera);
+        let mut frames = Vec::new();
+        for tau in [0.0, 1e9] {
+            let frame = renderer.render(&camera.gpu_view(tau, &scene.grid, 7, FLAG_FRUSTUM_CULL), w, h).unwrap();
+            assert_eq!(frame.clusters, if tau == 0.0 { 6 } else { 1 });
+            let (bad, mean) = image_difference(&frame.rgba, &reference, 3.0 / 255.0);
+            println!("eye {eye:?} tau {tau}: {bad} pixels off by more than 3/255, mean difference {mean:.5}");
+            assert!(bad <= (w * h / 100) as usize, "eye {eye:?} tau {tau}: {bad} pixels differ from the reference");
+            assert!(mean < 0.004, "eye {eye:?} tau {tau}: mean difference {mean}");
+            frames.push(frame.rgba);
+        }
+        let same = frames[0].chunks_exact(4).zip(frames[1].chunks_exact(4)).filter(|(a, b)| (0..3).all(|k| a[k].abs_diff(b[k]) <= 3)).count();
+        assert!(same >= (w * h) as usize * 99 / 100, "eye {eye:?}: the two cuts differ in {} pixels", (w * h) as usize - same);
+    }
+    drop(renderer);
+    drop(device);
+    assert_silent(&counts);
 }
