@@ -17,8 +17,8 @@ struct Cluster {
     uint header_offset;
     uint vertex_count;
     uint triangle_count;
-    uint pad0;
-    uint pad1;
+    uint group;
+    uint level;
 };
 
 // The camera and pass parameters (one per submission).
@@ -35,8 +35,14 @@ struct View {
     float grid_step;
     uint cluster_count;
     uint max_groups;
-    uint pad0;
-    uint pad1;
+    uint instance_count;
+    uint bin_count;
+    vec3 model_center;
+    float model_far;
+    float model_near;
+    uint mode;
+    uint visible_capacity;
+    uint index_capacity;
 };
 
 // Atomic counters that double as indirect arguments.
@@ -50,16 +56,41 @@ struct Counters {
     uint first_index;
     int vertex_offset;
     uint first_instance;
-    uint mesh_x;
-    uint mesh_y;
-    uint mesh_z;
+    uint task_x;
+    uint task_y;
+    uint task_z;
     uint triangles;
+    uint work_count;
+    uint select_x;
+    uint select_y;
+    uint select_z;
+    uint index_alloc;
+    uint dropped;
+};
+
+// The clusters of one DAG level: `level_order[first .. first + count]`, with the smallest own
+// error and the largest parent error among them (object space).
+struct LevelBin {
+    uint first;
+    uint count;
+    float min_own_error;
+    float max_parent_error;
 };
 
 // View.flags
 const uint FLAG_FRUSTUM_CULL = 1u;
 const uint FLAG_WRITE_PROJECTED = 2u;
 const uint FLAG_DROP_SOME = 4u;
+
+// View.mode: what the front faces show.
+const uint MODE_SHADED = 0u;
+const uint MODE_CLUSTER = 1u;
+const uint MODE_GROUP = 2u;
+const uint MODE_LEVEL = 3u;
+const uint MODE_ERROR = 4u;
+
+// Clusters a task workgroup of the mesh path launches (one mesh workgroup each).
+const uint CLUSTERS_PER_TASK = 32u;
 
 layout(set = 0, binding = 0, std140) uniform ViewBlock { View view; };
 layout(set = 0, binding = 1, std430) readonly buffer ClusterBlock { Cluster clusters[]; };
@@ -86,6 +117,9 @@ uint read_bits(uint stream, uint bit, uint width) {
 uint read_u8(uint byte_offset) {
     return (page_words[byte_offset >> 2] >> ((byte_offset & 3u) * 8u)) & 0xFFu;
 }
+
+// Instance translations (xyz; w unused), object space of the scene.
+layout(set = 0, binding = 8, std430) readonly buffer InstanceBlock { vec4 instances[]; };
 
 // Object-space position of vertex `v` of cluster `c` (FORMAT.md §5.3, one f32 multiply, then
 // one f32 add, as the reference decoder does).
@@ -204,16 +238,17 @@ float sqrt_rn(float x) {
 }
 #endif
 
-// FORMAT.md §6: projected(sphere, error) in pixels, with the spec's operations in its order:
+// FORMAT.md §6: projected(sphere, error) in pixels for an eye in the cluster's object space
+// (the view's eye minus the instance translation; exactly the view's eye for an instance at 0), with the spec's operations in its order:
 // dx = center - eye; d = sqrt((dx*dx + dy*dy) + dz*dz); d = max(d - radius, z_near);
 // p = ((error / d) * (H * 0.5)) * proj11. +inf stays +inf.
-float projected_error(vec4 sphere, float error) {
+float projected_error(vec4 sphere, float error, vec3 eye) {
     if (error == 0.0) {
         return 0.0;
     }
-    precise float dx = sphere.x - view.eye.x;
-    precise float dy = sphere.y - view.eye.y;
-    precise float dz = sphere.z - view.eye.z;
+    precise float dx = sphere.x - eye.x;
+    precise float dy = sphere.y - eye.y;
+    precise float dz = sphere.z - eye.z;
     precise float xx = dx * dx;
     precise float yy = dy * dy;
     precise float zz = dz * dz;
@@ -226,4 +261,20 @@ float projected_error(vec4 sphere, float error) {
     precise float scaled = q * half_h;
     precise float p = scaled * view.proj_y;
     return p;
+}
+
+// A colour for an integer, never pure red (the crack test's flag).
+vec3 id_color(uint id) {
+    uint h = id * 0x9E3779B1u;
+    h ^= h >> 15;
+    h *= 0x85EBCA77u;
+    h ^= h >> 13;
+    return vec3(0.25) + 0.7 * vec3(float(h & 255u), float((h >> 8) & 255u), float((h >> 16) & 255u)) / 255.0;
+}
+
+// Heat colour for t in [0, 1]: blue, green, yellow, orange (never pure red).
+vec3 heat_color(float t) {
+    t = clamp(t, 0.0, 1.0);
+    return mix(mix(vec3(0.1, 0.2, 0.9), vec3(0.1, 0.8, 0.3), min(t * 2.0, 1.0)),
+               vec3(1.0, 0.55, 0.1), max(t * 2.0 - 1.0, 0.0));
 }

@@ -1,10 +1,14 @@
 #version 460
-// Front faces: grey headlight shading from the screen-space normal. Back faces: pure red, no
-// lighting; on a closed mesh seen from outside any red pixel is a hole (the crack test).
+// Front faces: headlight shading from the screen-space normal, tinted by the view mode (per
+// cluster, per group, DAG level, projected error). Back faces: pure red, no lighting; on a
+// closed mesh seen from outside any red pixel is a hole (the crack test).
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 
+layout(set = 0, binding = 5, std430) readonly buffer VisibleBlock { uvec2 visible[]; };
+
 layout(location = 0) in vec3 world_position;
+layout(location = 1) flat in uint slot;
 layout(location = 0) out vec4 color;
 
 void main() {
@@ -15,6 +19,26 @@ void main() {
     vec3 n = normalize(cross(dFdx(world_position), dFdy(world_position)));
     vec3 to_eye = normalize(view.eye - world_position);
     float lambert = abs(dot(n, to_eye));
-    // Never pure red: green and blue stay above zero.
-    color = vec4(vec3(0.08) + vec3(0.85, 0.80, 0.72) * lambert, 1.0);
+    if (view.mode == MODE_SHADED) {
+        // Never pure red: green and blue stay above zero.
+        color = vec4(vec3(0.08) + vec3(0.85, 0.80, 0.72) * lambert, 1.0);
+        return;
+    }
+    uvec2 entry = visible[slot];
+    Cluster c = clusters[entry.x];
+    vec3 tint;
+    if (view.mode == MODE_CLUSTER) {
+        tint = id_color(entry.x);
+    } else if (view.mode == MODE_GROUP) {
+        tint = id_color(c.group);
+    } else if (view.mode == MODE_LEVEL) {
+        tint = heat_color(float(c.level) / 12.0);
+    } else {
+        // Own projected error over tau: 0 (level 0, exact) blue .. tau orange.
+        vec3 eye = view.eye - instances[entry.y].xyz;
+        float d = max(distance(c.own_sphere.xyz, eye) - c.own_sphere.w, view.z_near);
+        float p = c.own_error / d * view.viewport_height * 0.5 * view.proj_y;
+        tint = heat_color(view.tau > 0.0 ? p / view.tau : 0.0);
+    }
+    color = vec4(tint * (0.25 + 0.75 * lambert), 1.0);
 }

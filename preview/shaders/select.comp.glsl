@@ -1,16 +1,20 @@
 #version 460
-// Flat per-cluster LOD selection (FORMAT.md §6): one invocation per cluster draws iff
-// projected(own) <= tau < projected(parent), optionally frustum-culled against the parent sphere
-// (which bounds the cluster's geometry), and appends the cluster to the visible list.
+// Per-cluster LOD selection (FORMAT.md §6): one workgroup per work item of the culling pass
+// (an instance and a range of its clusters); its invocations stride over the range. A cluster
+// is drawn iff projected(own) <= tau < projected(parent), with the eye moved into the
+// instance's object space, optionally frustum-culled against the parent sphere (which bounds
+// the cluster's geometry); it is appended to the visible list as (cluster, instance).
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 
 layout(local_size_x = 64) in;
 
 layout(set = 0, binding = 4, std430) buffer CounterBlock { Counters counters; };
-layout(set = 0, binding = 5, std430) writeonly buffer VisibleBlock { uint visible[]; };
-// With FLAG_WRITE_PROJECTED: (own, parent) projected errors of every cluster, for diagnostics.
+layout(set = 0, binding = 5, std430) writeonly buffer VisibleBlock { uvec2 visible[]; };
+// With FLAG_WRITE_PROJECTED: (own, parent) projected errors of every cluster (instance 0 only).
 layout(set = 0, binding = 7, std430) writeonly buffer ProjectedBlock { vec2 projected[]; };
+layout(set = 0, binding = 10, std430) readonly buffer WorkBlock { uvec4 work[]; };
+layout(set = 0, binding = 11, std430) readonly buffer LevelOrderBlock { uint level_order[]; };
 
 bool sphere_in_frustum(vec4 sphere) {
     for (int i = 0; i < 6; i++) {
@@ -23,36 +27,47 @@ bool sphere_in_frustum(vec4 sphere) {
 }
 
 void main() {
-    uint group = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
-    uint i = group * gl_WorkGroupSize.x + gl_LocalInvocationID.x;
-    if (i >= view.cluster_count) {
+    uint w = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+    if (w >= counters.work_count) {
         return;
     }
-    Cluster c = clusters[i];
-    float own = projected_error(c.own_sphere, c.own_error);
-    float parent = projected_error(c.parent_sphere, c.parent_error);
-    if ((view.flags & FLAG_WRITE_PROJECTED) != 0u) {
-        projected[i] = vec2(own, parent);
+    uvec4 item = work[w];
+    uint instance = item.x;
+    vec3 t = instances[instance].xyz;
+    precise vec3 eye = view.eye - t;
+    for (uint j = item.y + gl_LocalInvocationID.x; j < item.y + item.z; j += gl_WorkGroupSize.x) {
+        uint i = level_order[j];
+        Cluster c = clusters[i];
+        float own = projected_error(c.own_sphere, c.own_error, eye);
+        float parent = projected_error(c.parent_sphere, c.parent_error, eye);
+        if ((view.flags & FLAG_WRITE_PROJECTED) != 0u && instance == 0u) {
+            projected[i] = vec2(own, parent);
+        }
+        if (!(own <= view.tau && view.tau < parent)) {
+            continue;
+        }
+        if ((view.flags & FLAG_FRUSTUM_CULL) != 0u && !sphere_in_frustum(vec4(c.parent_sphere.xyz + t, c.parent_sphere.w))) {
+            continue;
+        }
+        // Test hook: drop every fifth selected cluster, so that tests can show the crack test
+        // sees holes.
+        if ((view.flags & FLAG_DROP_SOME) != 0u && i % 5u == 0u) {
+            continue;
+        }
+        uint slot = atomicAdd(counters.visible_count, 1u);
+        if (slot >= view.visible_capacity) {
+            atomicAdd(counters.dropped, 1u);
+            continue;
+        }
+        visible[slot] = uvec2(i, instance);
+        atomicAdd(counters.triangles, c.triangle_count);
+        // The expansion pass: one workgroup per visible cluster, at most max_groups (the
+        // device limit); its workgroups stride over the rest.
+        atomicMax(counters.dispatch_x, min(slot + 1u, view.max_groups));
+        // The mesh path: one task workgroup per CLUSTERS_PER_TASK visible clusters, a 2D grid
+        // of max_groups-wide rows whose surplus workgroups launch nothing.
+        uint task = slot / CLUSTERS_PER_TASK;
+        atomicMax(counters.task_x, min(task + 1u, view.max_groups));
+        atomicMax(counters.task_y, task / view.max_groups + 1u);
     }
-    if (!(own <= view.tau && view.tau < parent)) {
-        return;
-    }
-    if ((view.flags & FLAG_FRUSTUM_CULL) != 0u && !sphere_in_frustum(c.parent_sphere)) {
-        return;
-    }
-    // Test hook: drop every fifth selected cluster, so that tests can show the crack test
-    // sees holes.
-    if ((view.flags & FLAG_DROP_SOME) != 0u && i % 5u == 0u) {
-        return;
-    }
-    uint slot = atomicAdd(counters.visible_count, 1u);
-    visible[slot] = i;
-    atomicAdd(counters.triangles, c.triangle_count);
-    // The expansion pass is dispatched indirectly with one workgroup per visible cluster, at
-    // most max_groups (the device limit); its workgroups stride over the rest.
-    atomicMax(counters.dispatch_x, min(slot + 1u, view.max_groups));
-    // The mesh-shader draw needs exactly one workgroup per cluster: a 2D grid of
-    // max_groups-wide rows, whose surplus workgroups in the last row emit nothing.
-    atomicMax(counters.mesh_x, min(slot + 1u, view.max_groups));
-    atomicMax(counters.mesh_y, slot / view.max_groups + 1u);
 }

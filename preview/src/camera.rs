@@ -137,9 +137,16 @@ impl Camera {
             grid_origin: grid.origin,
             grid_step: grid.step,
             cluster_count,
+            // Filled in by the renderer, which knows the scene and the device.
             max_groups: 0,
-            pad0: 0,
-            pad1: 0,
+            instance_count: 0,
+            bin_count: 0,
+            model_center: [0.0; 3],
+            model_far: 0.0,
+            model_near: 0.0,
+            mode: crate::gpu_types::MODE_SHADED,
+            visible_capacity: 0,
+            index_capacity: 0,
         }
     }
 }

@@ -28,13 +28,13 @@ pub struct GpuCluster {
     pub vertex_count: u32,
     /// Triangles (1..=128).
     pub triangle_count: u32,
-    /// Padding to 64 bytes.
-    pub pad0: u32,
-    /// Padding to 64 bytes.
-    pub pad1: u32,
+    /// The group the cluster is a member of (its parent pair; for per-group colours).
+    pub group: u32,
+    /// DAG level of that group (0 = original geometry).
+    pub level: u32,
 }
 
-/// Camera and pass parameters of one submission (GLSL `View`, a std140 uniform, 224 bytes).
+/// Camera and pass parameters of one submission (GLSL `View`, a std140 uniform, 256 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuView {
@@ -62,10 +62,47 @@ pub struct GpuView {
     pub cluster_count: u32,
     /// Most workgroups of one indirect dispatch dimension (device limit).
     pub max_groups: u32,
-    /// Padding.
-    pub pad0: u32,
-    /// Padding.
-    pub pad1: u32,
+    /// Number of instances in the instance buffer.
+    pub instance_count: u32,
+    /// Number of [`GpuLevelBin`]s (DAG levels).
+    pub bin_count: u32,
+    /// A point of the model (object space) that instance culling measures distances from.
+    pub model_center: [f32; 3],
+    /// Largest `|c - model_center| - r` over all group spheres (c, r), object space.
+    pub model_far: f32,
+    /// Largest `|c - model_center| + r` over all group spheres: the instance's bounding radius.
+    pub model_near: f32,
+    /// `MODE_*`: what front faces show.
+    pub mode: u32,
+    /// Entries of the visible list buffer; clusters beyond it are dropped and counted.
+    pub visible_capacity: u32,
+    /// Entries of the fallback path's index buffer.
+    pub index_capacity: u32,
+}
+
+/// `GpuView::mode`: grey headlight shading.
+pub const MODE_SHADED: u32 = 0;
+/// `GpuView::mode`: a colour per cluster.
+pub const MODE_CLUSTER: u32 = 1;
+/// `GpuView::mode`: a colour per group (the cluster's parent group).
+pub const MODE_GROUP: u32 = 2;
+/// `GpuView::mode`: DAG level, blue (0) to orange (12+).
+pub const MODE_LEVEL: u32 = 3;
+/// `GpuView::mode`: the cluster's own projected error over τ, blue (0) to orange (τ).
+pub const MODE_ERROR: u32 = 4;
+
+/// The clusters of one DAG level in the level-sorted order (GLSL `LevelBin`, std430, 16 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuLevelBin {
+    /// First index into the level order.
+    pub first: u32,
+    /// Clusters of the level.
+    pub count: u32,
+    /// Smallest own error among them (object space).
+    pub min_own_error: f32,
+    /// Largest parent error among them (object space; `+inf` if any is a root).
+    pub max_parent_error: f32,
 }
 
 /// `GpuView::flags`: cull clusters whose parent sphere is outside the frustum.
@@ -75,7 +112,7 @@ pub const FLAG_WRITE_PROJECTED: u32 = 2;
 /// `GpuView::flags`: test hook that drops every fifth selected cluster (makes holes).
 pub const FLAG_DROP_SOME: u32 = 4;
 
-/// Atomic counters that double as indirect arguments (GLSL `Counters`, std430, 52 bytes).
+/// Atomic counters that double as indirect arguments (GLSL `Counters`, std430, 76 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct GpuCounters {
@@ -97,20 +134,42 @@ pub struct GpuCounters {
     pub vertex_offset: i32,
     /// Always 0.
     pub first_instance: u32,
-    /// `VkDrawMeshTasksIndirectCommandEXT` of the mesh-shader path: min(visible, max_groups).
-    pub mesh_x: u32,
-    /// ceil(visible / max_groups) (at least 1).
-    pub mesh_y: u32,
+    /// `VkDrawMeshTasksIndirectCommandEXT` of the mesh-shader path: task workgroups (one per
+    /// 32 visible clusters) in max_groups-wide rows.
+    pub task_x: u32,
+    /// Rows of task workgroups (at least 1).
+    pub task_y: u32,
     /// Always 1.
-    pub mesh_z: u32,
+    pub task_z: u32,
     /// Triangles of the visible clusters.
     pub triangles: u32,
+    /// Work items (instance, cluster range) written by instance culling.
+    pub work_count: u32,
+    /// `VkDispatchIndirectCommand` of the selection pass: one workgroup per work item, in rows.
+    pub select_x: u32,
+    /// Rows of the selection dispatch (at least 1).
+    pub select_y: u32,
+    /// Always 1.
+    pub select_z: u32,
+    /// Index-buffer allocator of the fallback expansion.
+    pub index_alloc: u32,
+    /// Clusters dropped because the visible list or the index buffer was full.
+    pub dropped: u32,
 }
 
 impl GpuCounters {
     /// The values a pass starts from: zero counts, unit y/z and instance counts.
     pub fn reset() -> GpuCounters {
-        GpuCounters { dispatch_y: 1, dispatch_z: 1, instance_count: 1, mesh_y: 1, mesh_z: 1, ..Default::default() }
+        GpuCounters {
+            dispatch_y: 1,
+            dispatch_z: 1,
+            instance_count: 1,
+            task_y: 1,
+            task_z: 1,
+            select_y: 1,
+            select_z: 1,
+            ..Default::default()
+        }
     }
 }
 
@@ -119,7 +178,9 @@ pub const DISPATCH_ARGS_OFFSET: u64 = std::mem::offset_of!(GpuCounters, dispatch
 /// Byte offset of the `VkDrawIndexedIndirectCommand` in [`GpuCounters`].
 pub const DRAW_ARGS_OFFSET: u64 = std::mem::offset_of!(GpuCounters, index_count) as u64;
 /// Byte offset of the `VkDrawMeshTasksIndirectCommandEXT` in [`GpuCounters`].
-pub const MESH_ARGS_OFFSET: u64 = std::mem::offset_of!(GpuCounters, mesh_x) as u64;
+pub const MESH_ARGS_OFFSET: u64 = std::mem::offset_of!(GpuCounters, task_x) as u64;
+/// Byte offset of the selection pass's `VkDispatchIndirectCommand` in [`GpuCounters`].
+pub const SELECT_ARGS_OFFSET: u64 = std::mem::offset_of!(GpuCounters, select_x) as u64;
 
 #[cfg(test)]
 mod tests {
@@ -186,7 +247,7 @@ mod tests {
     #[test]
     fn cluster_matches_glsl_std430() {
         let m = members!(GpuCluster: own_sphere, parent_sphere, own_error, parent_error, page, header_offset,
-            vertex_count, triangle_count, pad0, pad1);
+            vertex_count, triangle_count, group, level);
         check("Cluster", false, &m, size_of::<GpuCluster>());
         assert_eq!(size_of::<GpuCluster>(), 64);
     }
@@ -194,20 +255,40 @@ mod tests {
     #[test]
     fn view_matches_glsl_std140() {
         let m = members!(GpuView: view_proj, frustum, eye, proj_y, viewport_height, z_near, tau, flags,
-            grid_origin, grid_step, cluster_count, max_groups, pad0, pad1);
+            grid_origin, grid_step, cluster_count, max_groups, instance_count, bin_count, model_center, model_far,
+            model_near, mode, visible_capacity, index_capacity);
         check("View", true, &m, size_of::<GpuView>());
     }
 
     #[test]
     fn counters_match_glsl_std430_and_vulkan_commands() {
         let m = members!(GpuCounters: visible_count, dispatch_x, dispatch_y, dispatch_z, index_count,
-            instance_count, first_index, vertex_offset, first_instance, mesh_x, mesh_y, mesh_z, triangles);
+            instance_count, first_index, vertex_offset, first_instance, task_x, task_y, task_z, triangles, work_count,
+            select_x, select_y, select_z, index_alloc, dropped);
         check("Counters", false, &m, size_of::<GpuCounters>());
         // Indirect commands must be 4-aligned and laid out as Vulkan's structs.
         assert_eq!(size_of::<ash::vk::DispatchIndirectCommand>(), 12);
         assert_eq!(size_of::<ash::vk::DrawIndexedIndirectCommand>(), 20);
         assert_eq!(DRAW_ARGS_OFFSET + 20, MESH_ARGS_OFFSET);
         assert_eq!(DISPATCH_ARGS_OFFSET % 4, 0);
+        assert_eq!(size_of::<ash::vk::DrawMeshTasksIndirectCommandEXT>(), 12);
+        assert_eq!(MESH_ARGS_OFFSET % 4, 0);
+        assert_eq!(SELECT_ARGS_OFFSET % 4, 0);
+    }
+
+    #[test]
+    fn level_bin_matches_glsl_std430() {
+        let m = members!(GpuLevelBin: first, count, min_own_error, max_parent_error);
+        check("LevelBin", false, &m, size_of::<GpuLevelBin>());
+    }
+
+    #[test]
+    fn mode_and_flag_constants_match_glsl() {
+        for (name, value) in [("MODE_SHADED", MODE_SHADED), ("MODE_CLUSTER", MODE_CLUSTER), ("MODE_GROUP", MODE_GROUP),
+            ("MODE_LEVEL", MODE_LEVEL), ("MODE_ERROR", MODE_ERROR), ("FLAG_FRUSTUM_CULL", FLAG_FRUSTUM_CULL),
+            ("FLAG_WRITE_PROJECTED", FLAG_WRITE_PROJECTED), ("FLAG_DROP_SOME", FLAG_DROP_SOME)] {
+            assert!(COMMON_GLSL.contains(&format!("const uint {name} = {value}u;")), "{name} = {value} not in common.glsl");
+        }
     }
 
     #[test]
@@ -217,6 +298,6 @@ mod tests {
         let eye = m.iter().find(|(n, _, _)| n == "eye").unwrap();
         let proj = m.iter().find(|(n, _, _)| n == "proj_y").unwrap();
         assert_eq!((eye.1, proj.1), (160, 172));
-        assert_eq!(size, 224);
+        assert_eq!(size, 256);
     }
 }

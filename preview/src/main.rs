@@ -11,7 +11,7 @@ use preview::gpu_types::FLAG_FRUSTUM_CULL;
 use preview::image::write_png;
 use preview::scene::SceneData;
 use preview::verify::{verify, VerifyOptions};
-use preview::vk::{ContextOptions, Device, Renderer, RendererOptions};
+use preview::vk::{ContextOptions, Device, DrawPath, Renderer, RendererOptions};
 use serde_json::json;
 
 /// Render a .mres file through the GPU selection path: verify it, or write a screenshot.
@@ -62,6 +62,49 @@ struct Args {
     /// ulp of error) instead of the exact ones, and report how often that changes the result.
     #[arg(long)]
     naive_arithmetic: bool,
+    /// Draw path: `mesh` (VK_EXT_mesh_shader: task + mesh shaders; fails without it),
+    /// `fallback` (compute-expanded index buffer + indirect indexed draw), or `auto` (mesh
+    /// shaders where the device has them).
+    #[arg(long, value_enum, default_value_t = PathArg::Auto)]
+    path: PathArg,
+    /// What the screenshot shows on front faces.
+    #[arg(long, value_enum, default_value_t = ModeArg::Shaded)]
+    mode: ModeArg,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum PathArg {
+    Auto,
+    Mesh,
+    Fallback,
+}
+
+/// Visualisation modes (back faces are always pure red).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum ModeArg {
+    /// Grey headlight shading.
+    Shaded,
+    /// A colour per cluster.
+    Cluster,
+    /// A colour per group (the cluster's parent group).
+    Group,
+    /// DAG level, blue (0) to orange (12 and above).
+    Level,
+    /// The cluster's own projected error over tau, blue (0) to orange (tau).
+    Error,
+}
+
+impl ModeArg {
+    fn gpu(self) -> u32 {
+        use preview::gpu_types::*;
+        match self {
+            ModeArg::Shaded => MODE_SHADED,
+            ModeArg::Cluster => MODE_CLUSTER,
+            ModeArg::Group => MODE_GROUP,
+            ModeArg::Level => MODE_LEVEL,
+            ModeArg::Error => MODE_ERROR,
+        }
+    }
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32)> {
@@ -91,7 +134,11 @@ fn run(args: Args) -> Result<ExitCode> {
     let (width, height) = parse_size(&args.size)?;
     let file = MresFile::open(&args.file).with_context(|| format!("cannot read {}", args.file.display()))?;
     let scene = SceneData::from_file(&file).with_context(|| format!("{}", args.file.display()))?;
-    let device = Device::new(&ContextOptions { validation: args.validate, device_name: args.device.clone(), allow_mesh_shaders: false })?;
+    let device = Device::new(&ContextOptions {
+        validation: args.validate,
+        device_name: args.device.clone(),
+        allow_mesh_shaders: args.path != PathArg::Fallback,
+    })?;
     let info = device.info.clone();
     let counts = device.counts.clone();
     println!(
@@ -111,13 +158,19 @@ fn run(args: Args) -> Result<ExitCode> {
         scene.pages.len(),
         scene.level0_triangles
     );
-    let mut renderer = Renderer::new(&device, &scene, RendererOptions { naive_arithmetic: args.naive_arithmetic })?;
+    let path = match args.path {
+        PathArg::Auto => DrawPath::Auto,
+        PathArg::Mesh => DrawPath::Mesh,
+        PathArg::Fallback => DrawPath::Fallback,
+    };
+    let mut renderer = Renderer::new(&device, &scene, RendererOptions { naive_arithmetic: args.naive_arithmetic, path, ..Default::default() })?;
+    println!("draw path: {}", renderer.path_name());
     let mut ok = true;
     let mut report_json = json!({
         "file": args.file.display().to_string(),
         "device": { "name": info.name, "driver": info.driver, "api_version": info.api_version,
                     "subgroup_size": info.subgroup_size, "mesh_shader_available": info.mesh_shader_available },
-        "path": "fallback (compute-expanded index buffer + indirect indexed draw)",
+        "path": renderer.path_name(),
         "selection_arithmetic": if args.naive_arithmetic { "naive (driver division and sqrt)" } else { "exact (FORMAT.md §6)" },
         "clusters": file.clusters.len(),
     });
@@ -127,7 +180,8 @@ fn run(args: Args) -> Result<ExitCode> {
             Some(c) => Camera::looking_at(parse_vec3(c)?, &scene.bounds, width, height),
             None => Camera::framing(&scene.bounds, width, height),
         };
-        let view = camera.gpu_view(args.tau, &scene.grid, file.clusters.len() as u32, FLAG_FRUSTUM_CULL);
+        let mut view = camera.gpu_view(args.tau, &scene.grid, file.clusters.len() as u32, FLAG_FRUSTUM_CULL);
+        view.mode = args.mode.gpu();
         let frame = renderer.render(&view, width, height)?;
         write_png(out, frame.width, frame.height, &frame.rgba)?;
         let times = frame

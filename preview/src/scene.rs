@@ -5,7 +5,7 @@
 use anyhow::{bail, Context as _, Result};
 use formats::mres::{Grid, MresFile, Sphere, NO_GROUP};
 
-use crate::gpu_types::GpuCluster;
+use crate::gpu_types::{GpuCluster, GpuLevelBin};
 
 /// Largest cluster index an index-buffer entry `(cluster << 8) | vertex` can carry.
 pub const MAX_CLUSTERS: usize = 1 << 24;
@@ -32,6 +32,50 @@ pub struct SceneData {
     pub bounds: Sphere,
     /// Triangles of the finest (level-0) clusters.
     pub level0_triangles: u64,
+    /// Cluster indices sorted by DAG level (stable: file order within a level).
+    pub level_order: Vec<u32>,
+    /// One bin per DAG level over `level_order`, with its error range.
+    pub bins: Vec<GpuLevelBin>,
+    /// Largest `|c - bounds.center| - r` over the group spheres (c, r), padded (object space).
+    pub model_far: f32,
+    /// Largest `|c - bounds.center| + r` over the group spheres, padded: a sphere of this radius
+    /// around `bounds.center` holds every group sphere (object space).
+    pub model_near: f32,
+}
+
+/// The level order and one bin per level (levels without clusters get empty bins).
+pub fn level_bins(clusters: &[GpuCluster]) -> (Vec<u32>, Vec<GpuLevelBin>) {
+    let mut order: Vec<u32> = (0..clusters.len() as u32).collect();
+    order.sort_by_key(|&i| clusters[i as usize].level);
+    let levels = clusters.iter().map(|c| c.level as usize + 1).max().unwrap_or(0);
+    let mut bins = vec![GpuLevelBin { first: 0, count: 0, min_own_error: f32::INFINITY, max_parent_error: 0.0 }; levels];
+    for (k, &i) in order.iter().enumerate() {
+        let c = &clusters[i as usize];
+        let bin = &mut bins[c.level as usize];
+        if bin.count == 0 {
+            bin.first = k as u32;
+        }
+        bin.count += 1;
+        bin.min_own_error = bin.min_own_error.min(c.own_error);
+        bin.max_parent_error = bin.max_parent_error.max(c.parent_error);
+    }
+    (order, bins)
+}
+
+/// (model_far, model_near) of the group spheres around `center` (see [`SceneData`]), in f64
+/// and padded by 10⁻³ of the radius so that the GPU's f32 distance bounds stay conservative.
+fn model_extent(file: &MresFile, center: [f32; 3]) -> (f32, f32) {
+    let (mut far, mut near) = (f64::NEG_INFINITY, 0.0f64);
+    for g in &file.groups {
+        let d = (0..3).map(|k| (g.sphere.center[k] as f64 - center[k] as f64).powi(2)).sum::<f64>().sqrt();
+        far = far.max(d - g.sphere.radius as f64);
+        near = near.max(d + g.sphere.radius as f64);
+    }
+    if file.groups.is_empty() {
+        return (0.0, 0.0);
+    }
+    let pad = near * 1e-3 + 1e-6;
+    ((far + pad) as f32, (near + pad) as f32)
 }
 
 impl SceneData {
@@ -80,19 +124,26 @@ impl SceneData {
                 header_offset: c.page_offset,
                 vertex_count: c.vertex_count as u32,
                 triangle_count: c.triangle_count as u32,
-                pad0: 0,
-                pad1: 0,
+                group: c.group,
+                level: parent.level,
             });
             index_capacity += 3 * c.triangle_count as u64;
         }
+        let bounds = points_bounds(&level0_positions).unwrap_or_else(|| model_bounds(file));
+        let (level_order, bins) = level_bins(&clusters);
+        let (model_far, model_near) = model_extent(file, bounds.center);
         Ok(SceneData {
+            level_order,
+            bins,
+            model_far,
+            model_near,
             clusters,
             page_bases,
             pages,
             index_capacity,
             grid: file.header.grid,
             root_bounds: model_bounds(file),
-            bounds: points_bounds(&level0_positions).unwrap_or_else(|| model_bounds(file)),
+            bounds,
             level0_triangles,
         })
     }

@@ -6,11 +6,11 @@ use std::sync::Arc;
 
 use formats::mres::{write_mres, Dag, DagCluster, Grid, Group, Header, MresFile, Sphere, UvQuant, NO_GROUP};
 use preview::camera::Camera;
-use preview::gpu_types::{FLAG_DROP_SOME, FLAG_FRUSTUM_CULL};
+use preview::gpu_types::{FLAG_DROP_SOME, FLAG_FRUSTUM_CULL, MODE_CLUSTER, MODE_LEVEL, MODE_SHADED};
 use preview::image::count_flagged;
 use preview::scene::SceneData;
 use preview::verify::{verify, VerifyOptions};
-use preview::vk::{validation_available, ContextOptions, Device, MessageCounts, Renderer, RendererOptions};
+use preview::vk::{validation_available, ContextOptions, Device, DrawPath, MessageCounts, Renderer, RendererOptions};
 
 /// A closed cube: six n×n-quad faces (one level-0 cluster each) in one group with error 0.05,
 /// simplified into one 12-triangle root cluster. Faces share their edge vertices' grid
@@ -83,9 +83,20 @@ fn gpu_required() -> bool {
 fn device(test: &str) -> Option<(Arc<Device>, Arc<MessageCounts>)> {
     let validation = validation_available();
     assert!(validation || !gpu_required(), "MRES_PREVIEW_REQUIRE_GPU=1 but VK_LAYER_KHRONOS_validation is not installed");
-    match Device::new(&ContextOptions { validation, ..Default::default() }) {
+    match Device::new(&ContextOptions { validation, allow_mesh_shaders: true, ..Default::default() }) {
         Ok(d) => {
-            println!("{test}: on {} (validation {})", d.info.name, if validation { "on" } else { "not installed" });
+            assert!(
+                d.info.mesh_shader_enabled || std::env::var("MRES_PREVIEW_REQUIRE_MESH").as_deref() != Ok("1"),
+                "MRES_PREVIEW_REQUIRE_MESH=1 but {} has no VK_EXT_mesh_shader",
+                d.info.name
+            );
+            println!(
+                "{test}: on {} ({}; validation {}; mesh shaders {})",
+                d.info.name,
+                d.info.driver,
+                if validation { "on" } else { "not installed" },
+                if d.info.mesh_shader_enabled { "on" } else { "not available" }
+            );
             let counts = d.counts.clone();
             Some((d, counts))
         }
@@ -272,6 +283,41 @@ fn screenshot_matches_a_cpu_reference_image() {
         assert!(same >= (w * h) as usize * 99 / 100, "eye {eye:?}: the two cuts differ in {} pixels", (w * h) as usize - same);
     }
     drop(renderer);
+    drop(device);
+    assert_silent(&counts);
+}
+
+/// Where the device has mesh shaders, the mesh path and the fallback draw the same cuts with
+/// the same pixels (within 3/255 on 99.5% of them) and the same cluster and triangle counts.
+#[test]
+fn mesh_and_fallback_paths_agree() {
+    let Some((device, counts)) = device("paths") else { return };
+    if !device.info.mesh_shader_enabled {
+        println!("paths: SKIPPED, {} has no VK_EXT_mesh_shader", device.info.name);
+        return;
+    }
+    let file = cube_file();
+    let scene = SceneData::from_file(&file).unwrap();
+    let mut mesh = Renderer::new(&device, &scene, RendererOptions { path: DrawPath::Mesh, ..Default::default() }).unwrap();
+    let mut fallback = Renderer::new(&device, &scene, RendererOptions { path: DrawPath::Fallback, ..Default::default() }).unwrap();
+    assert!(mesh.mesh_path() && !fallback.mesh_path());
+    let (w, h) = (128, 96);
+    for eye in [[2.6, 1.7, 3.1], [-3.0, -2.2, 1.2]] {
+        let camera = Camera::looking_at(eye, &scene.bounds, w, h);
+        for tau in [0.0, 1e9] {
+            for mode in [MODE_SHADED, MODE_CLUSTER, MODE_LEVEL] {
+                let mut view = camera.gpu_view(tau, &scene.grid, 7, FLAG_FRUSTUM_CULL);
+                view.mode = mode;
+                let a = mesh.render(&view, w, h).unwrap();
+                let b = fallback.render(&view, w, h).unwrap();
+                assert_eq!((a.clusters, a.triangles), (b.clusters, b.triangles));
+                let same = a.rgba.chunks_exact(4).zip(b.rgba.chunks_exact(4)).filter(|(p, q)| (0..3).all(|k| p[k].abs_diff(q[k]) <= 3)).count();
+                assert!(same * 1000 >= (w * h) as usize * 995, "eye {eye:?} tau {tau} mode {mode}: {} pixels differ", (w * h) as usize - same);
+                assert_eq!(count_flagged(&a.rgba), 0);
+            }
+        }
+    }
+    drop((mesh, fallback));
     drop(device);
     assert_silent(&counts);
 }

@@ -146,12 +146,15 @@ pub struct DeviceInfo {
     /// Subgroup size reported by `VkPhysicalDeviceSubgroupProperties` (informative only: the
     /// shaders never assume one).
     pub subgroup_size: u32,
-    /// Whether `VK_EXT_mesh_shader` (with the `meshShader` feature) is present on the device.
+    /// Whether `VK_EXT_mesh_shader` (with the `meshShader` and `taskShader` features) is present
+    /// on the device.
     pub mesh_shader_available: bool,
     /// Whether the device was created with `VK_EXT_mesh_shader` enabled.
     pub mesh_shader_enabled: bool,
-    /// `maxMeshWorkGroupCount[0]` when mesh shaders are available.
-    pub max_mesh_groups_x: u32,
+    /// `maxTaskWorkGroupCount[0]` when mesh shaders are available.
+    pub max_task_groups_x: u32,
+    /// `maxTaskWorkGroupTotalCount` when mesh shaders are available.
+    pub max_task_groups_total: u32,
 }
 
 /// Owner of the `VkDevice` (and its one queue).
@@ -258,7 +261,7 @@ impl Device {
             .synchronization2(true)
             // glslang's SPIR-V 1.6 uses LocalSizeId, which needs maintenance4 (required in 1.3).
             .maintenance4(true);
-        let mut mesh_features = vk::PhysicalDeviceMeshShaderFeaturesEXT::default().mesh_shader(true);
+        let mut mesh_features = vk::PhysicalDeviceMeshShaderFeaturesEXT::default().mesh_shader(true).task_shader(true);
         let mesh_enabled = options.allow_mesh_shaders && info.mesh_shader_available;
         let mut extensions = vec![];
         if mesh_enabled {
@@ -376,7 +379,7 @@ fn pick_physical_device(instance: &Instance, options: &ContextOptions) -> Result
                 _ => 4,
             };
             let cstr = |s: &[std::ffi::c_char]| CStr::from_ptr(s.as_ptr()).to_string_lossy().into_owned();
-            let mesh_ok = has_mesh_ext && fmesh.mesh_shader != 0;
+            let mesh_ok = has_mesh_ext && fmesh.mesh_shader != 0 && fmesh.task_shader != 0;
             let info = DeviceInfo {
                 name,
                 driver: format!("{} {}", cstr(&driver.driver_name), cstr(&driver.driver_info)),
@@ -388,7 +391,8 @@ fn pick_physical_device(instance: &Instance, options: &ContextOptions) -> Result
                 subgroup_size: subgroup.subgroup_size,
                 mesh_shader_available: mesh_ok,
                 mesh_shader_enabled: false,
-                max_mesh_groups_x: if mesh_ok { mesh_props.max_mesh_work_group_count[0] } else { 0 },
+                max_task_groups_x: if mesh_ok { mesh_props.max_task_work_group_count[0] } else { 0 },
+                max_task_groups_total: if mesh_ok { mesh_props.max_task_work_group_total_count } else { 0 },
             };
             candidates.push((rank, pd, family.unwrap_or(0) as u32, info));
         }

@@ -8,4 +8,4 @@ mod renderer;
 mod resources;
 
 pub use context::{validation_available, ContextOptions, Device, DeviceInfo, MessageCounts};
-pub use renderer::{Frame, PassTimes, Renderer, RendererOptions, Selection, CLEAR_RGBA};
+pub use renderer::{DrawPath, Frame, PassTimes, Renderer, RendererOptions, Selection, CLEAR_RGBA, MAX_VISIBLE};

@@ -13,21 +13,30 @@ use super::resources::{
     subresource_range, Buffer, CommandPool, DescriptorPool, DescriptorSetLayout, Fence, Image, Location, Pipeline,
     PipelineLayout, QueryPool, ShaderModule,
 };
-use crate::gpu_types::{GpuCounters, GpuView, DISPATCH_ARGS_OFFSET, DRAW_ARGS_OFFSET};
+use crate::gpu_types::{
+    GpuCounters, GpuView, DISPATCH_ARGS_OFFSET, DRAW_ARGS_OFFSET, MESH_ARGS_OFFSET, SELECT_ARGS_OFFSET,
+};
 use crate::scene::SceneData;
 
+const CULL_SPV: &[u8] = include_bytes!("../../shaders/cull.comp.spv");
 const SELECT_SPV: &[u8] = include_bytes!("../../shaders/select.comp.spv");
 const SELECT_NAIVE_SPV: &[u8] = include_bytes!("../../shaders/select_naive.comp.spv");
 const EXPAND_SPV: &[u8] = include_bytes!("../../shaders/expand.comp.spv");
 const DRAW_VERT_SPV: &[u8] = include_bytes!("../../shaders/draw.vert.spv");
 const DRAW_FRAG_SPV: &[u8] = include_bytes!("../../shaders/draw.frag.spv");
+const DRAW_TASK_SPV: &[u8] = include_bytes!("../../shaders/draw.task.spv");
+const DRAW_MESH_SPV: &[u8] = include_bytes!("../../shaders/draw.mesh.spv");
 
 /// Colour attachment format; the read-back bytes are RGBA8.
 pub const COLOR_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
 const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 /// Background colour (never pure red).
 pub const CLEAR_RGBA: [f32; 4] = [0.16, 0.18, 0.22, 1.0];
-const SELECT_GROUP_SIZE: u32 = 64;
+const CULL_GROUP_SIZE: u32 = 64;
+/// Largest visible list: a fallback index carries the visible slot in its upper 24 bits.
+pub const MAX_VISIBLE: u32 = 1 << 24;
+/// Default cap of the fallback index buffer (entries; 4 bytes each).
+const DEFAULT_INDEX_CAP: u64 = 1 << 26;
 const TIMESTAMPS: u32 = 4;
 
 /// The result of a selection pass.
@@ -44,9 +53,9 @@ pub struct Selection {
 pub struct PassTimes {
     /// Cluster selection.
     pub select_ms: f64,
-    /// Index expansion.
+    /// Index expansion (0 on the mesh-shader path).
     pub expand_ms: f64,
-    /// Rasterization (both draws).
+    /// Rasterization (both draws; on the mesh path this includes the task and mesh shaders).
     pub draw_ms: f64,
 }
 
@@ -62,7 +71,11 @@ pub struct Frame {
     /// Clusters drawn.
     pub clusters: u32,
     /// Triangles drawn.
-    pub triangles: u32,
+    pub triangles: u64,
+    /// Clusters selected but not drawn because the visible list or index buffer was full.
+    pub dropped: u32,
+    /// Reverse-Z depth (`z_near / view depth`, 0 = background), row by row from the top, when asked for.
+    pub depth: Option<Vec<f32>>,
     /// GPU pass times, where the queue has timestamps.
     pub times: Option<PassTimes>,
 }
@@ -71,23 +84,56 @@ struct RenderTarget {
     color: Image,
     depth: Image,
     readback: Buffer,
+    depth_readback: Buffer,
+}
+
+/// How the selected clusters are drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DrawPath {
+    /// Mesh shaders where the device was created with them, else the fallback.
+    #[default]
+    Auto,
+    /// `VK_EXT_mesh_shader`: a task workgroup per 32 visible clusters, a mesh workgroup per cluster.
+    Mesh,
+    /// Compute-expanded index buffer + indirect indexed draw (any Vulkan 1.3 device).
+    Fallback,
 }
 
 /// Choices made when a [`Renderer`] is built.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct RendererOptions {
     /// Diagnostic: select with the driver's own f32 division and sqrt instead of the exact
     /// (f64-corrected) ones, to measure how far a device is from FORMAT.md §6.
     pub naive_arithmetic: bool,
+    /// Draw path; `Mesh` fails where the device was created without mesh shaders.
+    pub path: DrawPath,
+    /// Instance translations (object space); empty means one instance at the origin.
+    pub instances: Vec<[f32; 3]>,
+    /// Visible-list entries (default: every cluster of every instance, at most [`MAX_VISIBLE`]).
+    pub visible_capacity: Option<u32>,
+    /// Fallback index-buffer entries (default: every cluster's indices, at most 2^26 with
+    /// several instances).
+    pub index_capacity: Option<u64>,
 }
 
 /// A file's GPU buffers plus the pipelines that select and draw it.
 pub struct Renderer {
     device: Arc<Device>,
     cluster_count: u32,
+    instance_count: u32,
+    bin_count: u32,
+    model: ([f32; 3], f32, f32),
+    visible_capacity: u32,
+    index_capacity: u32,
+    mesh_path: bool,
+    max_groups: u32,
     _clusters: Buffer,
     _page_bases: Buffer,
     _pages: Buffer,
+    _instances: Buffer,
+    _bins: Buffer,
+    _work: Buffer,
+    _level_order: Buffer,
     view: Buffer,
     counters: Buffer,
     visible: Buffer,
@@ -101,10 +147,13 @@ pub struct Renderer {
     pipeline_layout: PipelineLayout,
     _descriptor_pool: DescriptorPool,
     set: vk::DescriptorSet,
+    cull: Pipeline,
     select: Pipeline,
     expand: Pipeline,
     draw_front: Pipeline,
     draw_back: Pipeline,
+    mesh_front: Option<Pipeline>,
+    mesh_back: Option<Pipeline>,
     _command_pool: CommandPool,
     cmd: vk::CommandBuffer,
     fence: Fence,
@@ -132,16 +181,51 @@ impl Renderer {
             }
             Ok(())
         };
-        too_big("decompressed pages", scene.pages.len() as u64)?;
-        too_big("index buffer", scene.index_capacity * 4)?;
-        too_big("cluster records", scene.clusters.len() as u64 * 64)?;
+        let mesh_path = match options.path {
+            DrawPath::Auto => device.mesh.is_some(),
+            DrawPath::Mesh if device.mesh.is_none() => {
+                bail!("the mesh-shader path needs VK_EXT_mesh_shader with task and mesh shaders, which {} lacks", device.info.name)
+            }
+            DrawPath::Mesh => true,
+            DrawPath::Fallback => false,
+        };
+        let instances: Vec<[f32; 4]> = if options.instances.is_empty() {
+            vec![[0.0; 4]]
+        } else {
+            options.instances.iter().map(|t| [t[0], t[1], t[2], 0.0]).collect()
+        };
+        let instance_count = u32::try_from(instances.len()).context("too many instances")?;
         let cluster_count = scene.clusters.len() as u32;
         let n = cluster_count.max(1) as u64;
+        let visible_capacity = options
+            .visible_capacity
+            .unwrap_or_else(|| (n * instance_count as u64).min(MAX_VISIBLE as u64) as u32)
+            .clamp(1, MAX_VISIBLE);
+        let index_capacity = options
+            .index_capacity
+            .unwrap_or(if instance_count == 1 { scene.index_capacity } else { (scene.index_capacity * instance_count as u64).min(DEFAULT_INDEX_CAP) })
+            .clamp(3, u32::MAX as u64 / 4) as u32;
+        too_big("decompressed pages", scene.pages.len() as u64)?;
+        too_big("index buffer", index_capacity as u64 * 4)?;
+        too_big("cluster records", scene.clusters.len() as u64 * 64)?;
+        too_big("visible list", visible_capacity as u64 * 8)?;
+        let mut max_groups = device.info.max_compute_groups_x.min(65535);
+        if mesh_path {
+            max_groups = max_groups.min(device.info.max_task_groups_x);
+            let tasks = (visible_capacity as u64).div_ceil(32);
+            if tasks > device.info.max_task_groups_total as u64 {
+                bail!("{tasks} task workgroups exceed this device's maxTaskWorkGroupTotalCount");
+            }
+        }
 
         let mut uploads = Vec::new();
         let clusters = gpu_buffer(device, cast_slice(&scene.clusters), U::STORAGE_BUFFER, &mut uploads)?;
         let page_bases = gpu_buffer(device, cast_slice(&scene.page_bases), U::STORAGE_BUFFER, &mut uploads)?;
         let pages = gpu_buffer(device, &scene.pages, U::STORAGE_BUFFER, &mut uploads)?;
+        let instance_buffer = gpu_buffer(device, cast_slice(&instances), U::STORAGE_BUFFER, &mut uploads)?;
+        let bins = gpu_buffer(device, cast_slice(&scene.bins), U::STORAGE_BUFFER, &mut uploads)?;
+        let level_order = gpu_buffer(device, cast_slice(&scene.level_order), U::STORAGE_BUFFER, &mut uploads)?;
+        let work = Buffer::new(device, instance_count as u64 * 16, U::STORAGE_BUFFER, Location::Gpu)?;
         let view = Buffer::new(device, std::mem::size_of::<GpuView>() as u64, U::UNIFORM_BUFFER, Location::Upload)?;
         let counters = Buffer::new(
             device,
@@ -149,17 +233,21 @@ impl Renderer {
             U::STORAGE_BUFFER | U::INDIRECT_BUFFER | U::TRANSFER_DST | U::TRANSFER_SRC,
             Location::Gpu,
         )?;
-        let visible = Buffer::new(device, n * 4, U::STORAGE_BUFFER | U::TRANSFER_SRC, Location::Gpu)?;
-        let indices = Buffer::new(device, scene.index_capacity * 4, U::STORAGE_BUFFER | U::INDEX_BUFFER, Location::Gpu)?;
+        let visible = Buffer::new(device, visible_capacity as u64 * 8, U::STORAGE_BUFFER | U::TRANSFER_SRC, Location::Gpu)?;
+        // The mesh path draws from the visible list alone.
+        let index_entries = if mesh_path { 1 } else { index_capacity as u64 };
+        let indices = Buffer::new(device, index_entries * 4, U::STORAGE_BUFFER | U::INDEX_BUFFER, Location::Gpu)?;
         let projected = Buffer::new(device, n * 8, U::STORAGE_BUFFER | U::TRANSFER_SRC, Location::Gpu)?;
         let readback_counters =
             Buffer::new(device, std::mem::size_of::<GpuCounters>() as u64, U::TRANSFER_DST, Location::Readback)?;
-        let readback_visible = Buffer::new(device, n * 4, U::TRANSFER_DST, Location::Readback)?;
+        let readback_visible = Buffer::new(device, visible_capacity as u64 * 8, U::TRANSFER_DST, Location::Readback)?;
         let readback_projected = Buffer::new(device, n * 8, U::TRANSFER_DST, Location::Readback)?;
 
         // Descriptor set: 0 view (uniform), 1 clusters, 2 page bases, 3 pages, 4 counters,
-        // 5 visible, 6 indices, 7 projected (storage); the same for every pipeline.
-        let storage = [&clusters, &page_bases, &pages, &counters, &visible, &indices, &projected];
+        // 5 visible, 6 indices, 7 projected, 8 instances, 9 level bins, 10 work items, 11 level
+        // order (storage); the same for every pipeline (shaders/common.glsl and each stage).
+        let storage =
+            [&clusters, &page_bases, &pages, &counters, &visible, &indices, &projected, &instance_buffer, &bins, &work, &level_order];
         let mut bindings = vec![vk::DescriptorSetLayoutBinding::default()
             .binding(0)
             .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
@@ -252,18 +340,35 @@ impl Renderer {
             (set_layout, pipeline_layout, descriptor_pool, set, command_pool, cmd, fence, queries)
         };
 
+        let cull = compute_pipeline(device, &pipeline_layout, CULL_SPV)?;
         let select =
             compute_pipeline(device, &pipeline_layout, if options.naive_arithmetic { SELECT_NAIVE_SPV } else { SELECT_SPV })?;
         let expand = compute_pipeline(device, &pipeline_layout, EXPAND_SPV)?;
-        let draw_front = draw_pipeline(device, &pipeline_layout, false)?;
-        let draw_back = draw_pipeline(device, &pipeline_layout, true)?;
+        let draw_front = draw_pipeline(device, &pipeline_layout, false, false)?;
+        let draw_back = draw_pipeline(device, &pipeline_layout, true, false)?;
+        let (mesh_front, mesh_back) = if mesh_path {
+            (Some(draw_pipeline(device, &pipeline_layout, false, true)?), Some(draw_pipeline(device, &pipeline_layout, true, true)?))
+        } else {
+            (None, None)
+        };
 
         let renderer = Renderer {
             device: device.clone(),
             cluster_count,
+            instance_count,
+            bin_count: scene.bins.len() as u32,
+            model: (scene.bounds.center, scene.model_far, scene.model_near),
+            visible_capacity,
+            index_capacity,
+            mesh_path,
+            max_groups,
             _clusters: clusters,
             _page_bases: page_bases,
             _pages: pages,
+            _instances: instance_buffer,
+            _bins: bins,
+            _work: work,
+            _level_order: level_order,
             view,
             counters,
             visible,
@@ -277,10 +382,13 @@ impl Renderer {
             pipeline_layout,
             _descriptor_pool: descriptor_pool,
             set,
+            cull,
             select,
             expand,
             draw_front,
             draw_back,
+            mesh_front,
+            mesh_back,
             _command_pool: command_pool,
             cmd,
             fence,
@@ -305,6 +413,20 @@ impl Renderer {
         &self.device
     }
 
+    /// Whether draws use the mesh-shader path.
+    pub fn mesh_path(&self) -> bool {
+        self.mesh_path
+    }
+
+    /// A one-line description of the draw path.
+    pub fn path_name(&self) -> &'static str {
+        if self.mesh_path {
+            "mesh shaders (task workgroup per 32 visible clusters, mesh workgroup per cluster)"
+        } else {
+            "fallback (compute-expanded index buffer + indirect indexed draw)"
+        }
+    }
+
     /// Runs the selection pass for `view` and reads back the visible list (and, with
     /// `FLAG_WRITE_PROJECTED` in `view.flags`, every cluster's projected errors).
     pub fn select(&mut self, view: &GpuView) -> Result<Selection> {
@@ -319,7 +441,7 @@ impl Renderer {
                     vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_READ);
                 let size = std::mem::size_of::<GpuCounters>() as u64;
                 dev.cmd_copy_buffer(cmd, self.counters.raw, self.readback_counters.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size }]);
-                dev.cmd_copy_buffer(cmd, self.visible.raw, self.readback_visible.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: n * 4 }]);
+                dev.cmd_copy_buffer(cmd, self.visible.raw, self.readback_visible.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: self.visible_capacity as u64 * 8 }]);
                 if want_projected {
                     dev.cmd_copy_buffer(cmd, self.projected.raw, self.readback_projected.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: n * 8 }]);
                 }
@@ -328,10 +450,13 @@ impl Renderer {
             }
         })?;
         let counters = self.read_counters()?;
-        if counters.visible_count > self.cluster_count {
-            bail!("GPU reported {} visible clusters of {}", counters.visible_count, self.cluster_count);
+        if counters.dropped > 0 || counters.visible_count > self.visible_capacity {
+            bail!("the visible list ({} entries) overflowed: {} clusters selected", self.visible_capacity, counters.visible_count);
         }
-        let visible: Vec<u32> = cast_slice::<u8, u32>(&self.readback_visible.read(counters.visible_count as usize * 4)?).to_vec();
+        let visible: Vec<u32> = cast_slice::<u8, [u32; 2]>(&self.readback_visible.read(counters.visible_count as usize * 8)?)
+            .iter()
+            .map(|e| e[0])
+            .collect();
         let projected = if want_projected {
             cast_slice::<u8, [f32; 2]>(&self.readback_projected.read(self.cluster_count as usize * 8)?).to_vec()
         } else {
@@ -343,6 +468,15 @@ impl Renderer {
     /// Selects, expands and draws the clusters for `view` into a `width` × `height` image and
     /// reads it back. Front faces are shaded, back faces pure red (the crack test's flag).
     pub fn render(&mut self, view: &GpuView, width: u32, height: u32) -> Result<Frame> {
+        self.render_frame(view, width, height, false)
+    }
+
+    /// [`Renderer::render`], also reading back the depth buffer.
+    pub fn render_with_depth(&mut self, view: &GpuView, width: u32, height: u32) -> Result<Frame> {
+        self.render_frame(view, width, height, true)
+    }
+
+    fn render_frame(&mut self, view: &GpuView, width: u32, height: u32, want_depth: bool) -> Result<Frame> {
         self.prepare_view(view)?;
         self.ensure_target(width, height)?;
         let target = self.target.as_ref().context("render target")?;
@@ -362,11 +496,19 @@ impl Renderer {
                 if let Some(q) = &self.queries {
                     dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 1);
                 }
-                dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.expand.raw);
-                dev.cmd_dispatch_indirect(cmd, self.counters.raw, DISPATCH_ARGS_OFFSET);
-                barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
-                    vk::PipelineStageFlags2::DRAW_INDIRECT | vk::PipelineStageFlags2::INDEX_INPUT | vk::PipelineStageFlags2::VERTEX_SHADER,
-                    vk::AccessFlags2::INDIRECT_COMMAND_READ | vk::AccessFlags2::INDEX_READ | vk::AccessFlags2::SHADER_READ);
+                if self.mesh_path {
+                    barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
+                        vk::PipelineStageFlags2::DRAW_INDIRECT | vk::PipelineStageFlags2::TASK_SHADER_EXT
+                            | vk::PipelineStageFlags2::MESH_SHADER_EXT | vk::PipelineStageFlags2::FRAGMENT_SHADER,
+                        vk::AccessFlags2::INDIRECT_COMMAND_READ | vk::AccessFlags2::SHADER_READ);
+                } else {
+                    dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.expand.raw);
+                    dev.cmd_dispatch_indirect(cmd, self.counters.raw, DISPATCH_ARGS_OFFSET);
+                    barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
+                        vk::PipelineStageFlags2::DRAW_INDIRECT | vk::PipelineStageFlags2::INDEX_INPUT
+                            | vk::PipelineStageFlags2::VERTEX_SHADER | vk::PipelineStageFlags2::FRAGMENT_SHADER,
+                        vk::AccessFlags2::INDIRECT_COMMAND_READ | vk::AccessFlags2::INDEX_READ | vk::AccessFlags2::SHADER_READ);
+                }
                 if let Some(q) = &self.queries {
                     dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 2);
                 }
@@ -390,7 +532,7 @@ impl Renderer {
                     .image_view(target.depth.view)
                     .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
                     .load_op(vk::AttachmentLoadOp::CLEAR)
-                    .store_op(vk::AttachmentStoreOp::DONT_CARE)
+                    .store_op(if want_depth { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE })
                     .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } });
                 let area = vk::Rect2D { offset: vk::Offset2D { x: 0, y: 0 }, extent };
                 dev.cmd_begin_rendering(cmd, &vk::RenderingInfo::default()
@@ -408,11 +550,22 @@ impl Renderer {
                     max_depth: 1.0,
                 }]);
                 dev.cmd_set_scissor(cmd, 0, &[area]);
-                dev.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT32);
-                for pipeline in [&self.draw_front, &self.draw_back] {
-                    dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
-                    dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout.raw, 0, &[self.set], &[]);
-                    dev.cmd_draw_indexed_indirect(cmd, self.counters.raw, DRAW_ARGS_OFFSET, 1, 20);
+                match (&self.mesh_front, &self.mesh_back, &self.device.mesh) {
+                    (Some(front), Some(back), Some(mesh)) if self.mesh_path => {
+                        for pipeline in [front, back] {
+                            dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
+                            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout.raw, 0, &[self.set], &[]);
+                            mesh.cmd_draw_mesh_tasks_indirect(cmd, self.counters.raw, MESH_ARGS_OFFSET, 1, 12);
+                        }
+                    }
+                    _ => {
+                        dev.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT32);
+                        for pipeline in [&self.draw_front, &self.draw_back] {
+                            dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
+                            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout.raw, 0, &[self.set], &[]);
+                            dev.cmd_draw_indexed_indirect(cmd, self.counters.raw, DRAW_ARGS_OFFSET, 1, 20);
+                        }
+                    }
                 }
                 dev.cmd_end_rendering(cmd);
                 if let Some(q) = &self.queries {
@@ -437,6 +590,23 @@ impl Renderer {
                     image_extent: vk::Extent3D { width: extent.width, height: extent.height, depth: 1 },
                 }];
                 dev.cmd_copy_image_to_buffer(cmd, target.color.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, target.readback.raw, &region);
+                if want_depth {
+                    let to_copy = [vk::ImageMemoryBarrier2::default()
+                        .src_stage_mask(vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS)
+                        .src_access_mask(vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE)
+                        .dst_stage_mask(vk::PipelineStageFlags2::COPY)
+                        .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
+                        .old_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+                        .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
+                        .image(target.depth.raw)
+                        .subresource_range(subresource_range(vk::ImageAspectFlags::DEPTH))];
+                    dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_copy));
+                    let region = [vk::BufferImageCopy {
+                        image_subresource: vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::DEPTH, mip_level: 0, base_array_layer: 0, layer_count: 1 },
+                        ..region[0]
+                    }];
+                    dev.cmd_copy_image_to_buffer(cmd, target.depth.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, target.depth_readback.raw, &region);
+                }
                 // The counters were last read as indirect arguments.
                 barrier(dev, cmd, vk::PipelineStageFlags2::DRAW_INDIRECT, vk::AccessFlags2::INDIRECT_COMMAND_READ,
                     vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_READ);
@@ -447,14 +617,19 @@ impl Renderer {
             }
         })?;
         let counters = self.read_counters()?;
-        let rgba = target.readback.read(extent.width as usize * extent.height as usize * 4)?;
+        let pixels = extent.width as usize * extent.height as usize;
+        let rgba = target.readback.read(pixels * 4)?;
+        let depth = if want_depth { Some(cast_slice::<u8, f32>(&target.depth_readback.read(pixels * 4)?).to_vec()) } else { None };
         let times = self.read_times()?;
+        let clusters = counters.visible_count.min(self.visible_capacity);
         Ok(Frame {
             width: extent.width,
             height: extent.height,
             rgba,
-            clusters: counters.visible_count,
-            triangles: counters.index_count / 3,
+            clusters,
+            triangles: if self.mesh_path { counters.triangles as u64 } else { counters.index_count as u64 / 3 },
+            dropped: counters.dropped,
+            depth,
             times,
         })
     }
@@ -462,7 +637,12 @@ impl Renderer {
     fn prepare_view(&self, view: &GpuView) -> Result<GpuView> {
         let mut view = *view;
         view.cluster_count = self.cluster_count;
-        view.max_groups = self.device.info.max_compute_groups_x.min(65535);
+        view.max_groups = self.max_groups;
+        view.instance_count = self.instance_count;
+        view.bin_count = self.bin_count;
+        (view.model_center, view.model_far, view.model_near) = self.model;
+        view.visible_capacity = self.visible_capacity;
+        view.index_capacity = self.index_capacity;
         self.view.write(bytes_of(&view))?;
         Ok(view)
     }
@@ -493,18 +673,20 @@ impl Renderer {
         let color = Image::new(&self.device, extent, COLOR_FORMAT,
             vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC, vk::ImageAspectFlags::COLOR)?;
         let depth = Image::new(&self.device, extent, DEPTH_FORMAT,
-            vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT, vk::ImageAspectFlags::DEPTH)?;
+            vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC, vk::ImageAspectFlags::DEPTH)?;
         let readback = Buffer::new(&self.device, width as u64 * height as u64 * 4, vk::BufferUsageFlags::TRANSFER_DST, Location::Readback)?;
-        self.target = Some(RenderTarget { color, depth, readback });
+        let depth_readback =
+            Buffer::new(&self.device, width as u64 * height as u64 * 4, vk::BufferUsageFlags::TRANSFER_DST, Location::Readback)?;
+        self.target = Some(RenderTarget { color, depth, readback, depth_readback });
         Ok(())
     }
 
-    /// Records the counter reset and the selection dispatch.
+    /// Records the counter reset, instance culling and the (indirect) selection dispatch.
     ///
     /// # Safety
     /// `cmd` must be in the recording state and belong to `dev` (this renderer's device).
     unsafe fn record_select(&self, dev: &ash::Device, cmd: vk::CommandBuffer) {
-        let groups = self.cluster_count.div_ceil(SELECT_GROUP_SIZE).max(1);
+        let groups = self.instance_count.div_ceil(CULL_GROUP_SIZE).max(1);
         let gx = groups.min(self.device.info.max_compute_groups_x.min(65535));
         let gy = groups.div_ceil(gx);
         // SAFETY: per this function's contract; all handles are owned by `self`.
@@ -514,9 +696,14 @@ impl Renderer {
             dev.cmd_update_buffer(cmd, self.counters.raw, 0, bytes_of(&GpuCounters::reset()));
             barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
                 vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE);
-            dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.select.raw);
+            dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.cull.raw);
             dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline_layout.raw, 0, &[self.set], &[]);
             dev.cmd_dispatch(cmd, gx, gy, 1);
+            barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
+                vk::PipelineStageFlags2::COMPUTE_SHADER | vk::PipelineStageFlags2::DRAW_INDIRECT,
+                vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE | vk::AccessFlags2::INDIRECT_COMMAND_READ);
+            dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.select.raw);
+            dev.cmd_dispatch_indirect(cmd, self.counters.raw, SELECT_ARGS_OFFSET);
         }
     }
 
@@ -618,16 +805,19 @@ fn compute_pipeline(device: &Arc<Device>, layout: &PipelineLayout, spirv: &[u8])
     }
 }
 
-/// The fallback draw: no vertex input (the vertex shader decodes positions from the pages),
-/// reverse-Z depth test. `back_faces` draws only back faces, pushed slightly away (depth bias)
+/// A draw pipeline: the fallback (no vertex input: the vertex shader decodes positions from
+/// the pages) or, with `mesh`, task + mesh shaders; reverse-Z depth test. `back_faces` draws only back faces, pushed slightly away (depth bias)
 /// so that front faces win every tie along silhouettes; otherwise only front faces.
-fn draw_pipeline(device: &Arc<Device>, layout: &PipelineLayout, back_faces: bool) -> Result<Pipeline> {
-    let vert = ShaderModule::new(device, DRAW_VERT_SPV)?;
+fn draw_pipeline(device: &Arc<Device>, layout: &PipelineLayout, back_faces: bool, mesh: bool) -> Result<Pipeline> {
     let frag = ShaderModule::new(device, DRAW_FRAG_SPV)?;
-    let stages = [
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert.raw).name(c"main"),
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag.raw).name(c"main"),
-    ];
+    let modules = if mesh {
+        vec![(vk::ShaderStageFlags::TASK_EXT, ShaderModule::new(device, DRAW_TASK_SPV)?), (vk::ShaderStageFlags::MESH_EXT, ShaderModule::new(device, DRAW_MESH_SPV)?)]
+    } else {
+        vec![(vk::ShaderStageFlags::VERTEX, ShaderModule::new(device, DRAW_VERT_SPV)?)]
+    };
+    let mut stages: Vec<vk::PipelineShaderStageCreateInfo> =
+        modules.iter().map(|(stage, m)| vk::PipelineShaderStageCreateInfo::default().stage(*stage).module(m.raw).name(c"main")).collect();
+    stages.push(vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag.raw).name(c"main"));
     let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
     let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_LIST);
     let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
@@ -652,10 +842,11 @@ fn draw_pipeline(device: &Arc<Device>, layout: &PipelineLayout, back_faces: bool
     let mut rendering = vk::PipelineRenderingCreateInfo::default()
         .color_attachment_formats(&color_formats)
         .depth_attachment_format(DEPTH_FORMAT);
-    let info = [vk::GraphicsPipelineCreateInfo::default()
-        .stages(&stages)
-        .vertex_input_state(&vertex_input)
-        .input_assembly_state(&assembly)
+    let mut info = vk::GraphicsPipelineCreateInfo::default().stages(&stages);
+    if !mesh {
+        info = info.vertex_input_state(&vertex_input).input_assembly_state(&assembly);
+    }
+    let info = [info
         .viewport_state(&viewport)
         .rasterization_state(&raster)
         .multisample_state(&multisample)

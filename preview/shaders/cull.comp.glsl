@@ -1,0 +1,72 @@
+#version 460
+// Instance culling: one invocation per instance. An instance outside the frustum (its bounding
+// sphere: the model centre translated, radius model_near) is dropped. For the others, the
+// instance's distance bounds which DAG levels can hold a selected cluster, and one work item
+// (instance, cluster range of `level_order`) is appended for the selection pass.
+//
+// Why the range is conservative: every group sphere (c, r) satisfies |c - C| - r <= model_far
+// and |c - C| + r <= model_near for the model centre C, so with D = |C + t - eye| every
+// clamped sphere distance max(d - r, z_near) lies in [max(D - model_near, z_near),
+// max(D + model_far, z_near)]. A cluster can only be drawn if own_error <= tau * dmax / k and
+// parent_error > tau * dmin / k (k = H/2 * proj11): levels whose smallest own error is above
+// the first bound or whose largest parent error is at most the second are skipped. The margins
+// below cover the f32 rounding of these few operations; the exact test is per cluster.
+#extension GL_GOOGLE_include_directive : require
+#include "common.glsl"
+
+layout(local_size_x = 64) in;
+
+layout(set = 0, binding = 4, std430) buffer CounterBlock { Counters counters; };
+layout(set = 0, binding = 9, std430) readonly buffer BinBlock { LevelBin bins[]; };
+layout(set = 0, binding = 10, std430) writeonly buffer WorkBlock { uvec4 work[]; };
+
+bool sphere_in_frustum(vec4 sphere) {
+    for (int i = 0; i < 6; i++) {
+        vec4 plane = view.frustum[i];
+        if (dot(plane.xyz, sphere.xyz) + plane.w < -sphere.w) {
+            return false;
+        }
+    }
+    return true;
+}
+
+void main() {
+    uint i = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * gl_WorkGroupSize.x + gl_LocalInvocationID.x;
+    if (i >= view.instance_count || view.bin_count == 0u) {
+        return;
+    }
+    vec3 t = instances[i].xyz;
+    vec3 center = view.model_center + t;
+    if ((view.flags & FLAG_FRUSTUM_CULL) != 0u && !sphere_in_frustum(vec4(center, view.model_near))) {
+        return;
+    }
+    uint lo = 0u;
+    uint hi = view.bin_count - 1u;
+    if ((view.flags & FLAG_WRITE_PROJECTED) == 0u) {
+        float distance = length(center - view.eye);
+        float k = view.viewport_height * 0.5 * view.proj_y;
+        float e_hi = view.tau * max(distance + view.model_far, view.z_near) / k * 1.01 + 1e-30;
+        float e_lo = view.tau * max(distance - view.model_near, view.z_near) / k * 0.99;
+        bool any = false;
+        for (uint b = 0u; b < view.bin_count; b++) {
+            LevelBin bin = bins[b];
+            if (bin.count > 0u && bin.min_own_error <= e_hi && bin.max_parent_error > e_lo) {
+                if (!any) {
+                    lo = b;
+                }
+                hi = b;
+                any = true;
+            }
+        }
+        if (!any) {
+            return;
+        }
+    }
+    uint first = bins[lo].first;
+    uint count = bins[hi].first + bins[hi].count - first;
+    uint w = atomicAdd(counters.work_count, 1u);
+    work[w] = uvec4(i, first, count, 0u);
+    // The selection pass runs one workgroup per work item: a 2D grid of max_groups-wide rows.
+    atomicMax(counters.select_x, min(w + 1u, view.max_groups));
+    atomicMax(counters.select_y, w / view.max_groups + 1u);
+}
