@@ -241,6 +241,15 @@ fn run(args: Args) -> Result<ExitCode> {
             report.flagged_renders,
             report.min_model_pixels
         );
+        println!(
+            "depth: {} model pixels against the tau 0 render, max difference / error bound {}, {} pixels ({:.4}%) over {} x the bound (allowed {}%)",
+            report.depth_model_pixels,
+            if report.depth_max_ratio.is_finite() { format!("{:.2}", report.depth_max_ratio) } else { "inf".into() },
+            report.depth_violations,
+            report.depth_violation_fraction() * 100.0,
+            report.depth_limit,
+            report.depth_max_fraction * 100.0
+        );
         println!("verify time: {:.1} s", started.elapsed().as_secs_f64());
         ok &= report.passed();
         report_json["verify"] = report.to_json();
