@@ -81,6 +81,7 @@ struct LevelBin {
 const uint FLAG_FRUSTUM_CULL = 1u;
 const uint FLAG_WRITE_PROJECTED = 2u;
 const uint FLAG_DROP_SOME = 4u;
+const uint FLAG_FULL_DETAIL = 8u;
 
 // View.mode: what the front faces show.
 const uint MODE_SHADED = 0u;

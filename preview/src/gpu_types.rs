@@ -111,6 +111,8 @@ pub const FLAG_FRUSTUM_CULL: u32 = 1;
 pub const FLAG_WRITE_PROJECTED: u32 = 2;
 /// `GpuView::flags`: test hook that drops every fifth selected cluster (makes holes).
 pub const FLAG_DROP_SOME: u32 = 4;
+/// `GpuView::flags`: the benchmark's alternatives draw every instance at level 0.
+pub const FLAG_FULL_DETAIL: u32 = 8;
 
 /// Atomic counters that double as indirect arguments (GLSL `Counters`, std430, 76 bytes).
 #[repr(C)]
@@ -286,7 +288,8 @@ mod tests {
     fn mode_and_flag_constants_match_glsl() {
         for (name, value) in [("MODE_SHADED", MODE_SHADED), ("MODE_CLUSTER", MODE_CLUSTER), ("MODE_GROUP", MODE_GROUP),
             ("MODE_LEVEL", MODE_LEVEL), ("MODE_ERROR", MODE_ERROR), ("FLAG_FRUSTUM_CULL", FLAG_FRUSTUM_CULL),
-            ("FLAG_WRITE_PROJECTED", FLAG_WRITE_PROJECTED), ("FLAG_DROP_SOME", FLAG_DROP_SOME)] {
+            ("FLAG_WRITE_PROJECTED", FLAG_WRITE_PROJECTED), ("FLAG_DROP_SOME", FLAG_DROP_SOME),
+            ("FLAG_FULL_DETAIL", FLAG_FULL_DETAIL)] {
             assert!(COMMON_GLSL.contains(&format!("const uint {name} = {value}u;")), "{name} = {value} not in common.glsl");
         }
     }

@@ -10,9 +10,11 @@
 //!   drawn cut of a closed mesh shows no back face from outside.
 #![deny(missing_docs)]
 
+pub mod bench;
 pub mod camera;
 pub mod gpu_types;
 pub mod image;
+pub mod lod_chain;
 pub mod scene;
 pub mod verify;
 pub mod vk;

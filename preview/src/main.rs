@@ -67,6 +67,23 @@ struct Args {
     /// shaders where the device has them).
     #[arg(long, value_enum, default_value_t = PathArg::Auto)]
     path: PathArg,
+    /// Benchmark: an N×N grid of instances (--grid) along a fixed camera path (--frames), drawn
+    /// with the DAG, at full resolution, and with a discrete LOD chain; prints GPU times per
+    /// pass, clusters and triangles drawn (uses --size, default 1920x1080 here, and --tau).
+    #[arg(long)]
+    bench: bool,
+    /// Benchmark grid side (1..=100): N×N instances.
+    #[arg(long, default_value_t = 10)]
+    grid: u32,
+    /// Benchmark frames per method.
+    #[arg(long, default_value_t = 60)]
+    frames: u32,
+    /// Benchmark frames of the full-resolution method when it draws over 10^9 triangles.
+    #[arg(long, default_value_t = 5)]
+    full_frames: u32,
+    /// Write the benchmark report as JSON.
+    #[arg(long, value_name = "JSON")]
+    json: Option<PathBuf>,
     /// What the screenshot shows on front faces.
     #[arg(long, value_enum, default_value_t = ModeArg::Shaded)]
     mode: ModeArg,
@@ -128,10 +145,14 @@ fn run(args: Args) -> Result<ExitCode> {
     if !args.headless {
         bail!("the windowed viewer is not implemented: use --headless (with --verify and/or --out)");
     }
-    if !args.verify && args.out.is_none() {
-        bail!("nothing to do: give --verify and/or --out PNG");
+    if !args.verify && args.out.is_none() && !args.bench {
+        bail!("nothing to do: give --verify, --out PNG and/or --bench");
     }
-    let (width, height) = parse_size(&args.size)?;
+    if !(1..=100).contains(&args.grid) {
+        bail!("--grid {}: must be 1..=100", args.grid);
+    }
+    let size = if args.bench && args.size == "512x512" { "1920x1080" } else { args.size.as_str() };
+    let (width, height) = parse_size(size)?;
     let file = MresFile::open(&args.file).with_context(|| format!("cannot read {}", args.file.display()))?;
     let scene = SceneData::from_file(&file).with_context(|| format!("{}", args.file.display()))?;
     let device = Device::new(&ContextOptions {
@@ -163,6 +184,49 @@ fn run(args: Args) -> Result<ExitCode> {
         PathArg::Mesh => DrawPath::Mesh,
         PathArg::Fallback => DrawPath::Fallback,
     };
+    if args.bench {
+        let instances = preview::bench::grid_instances(&scene, args.grid);
+        let started = std::time::Instant::now();
+        let chain = preview::lod_chain::LodChain::build(&file, 128).with_context(|| format!("{}", args.file.display()))?;
+        println!(
+            "LOD chain: {} levels ({} .. {} triangles) in {:.1} s",
+            chain.levels.len(),
+            chain.levels.first().map_or(0, |l| l.index_count / 3),
+            chain.levels.last().map_or(0, |l| l.index_count / 3),
+            started.elapsed().as_secs_f64()
+        );
+        let mut dag = Renderer::new(&device, &scene, RendererOptions { path, instances: instances.clone(), ..Default::default() })?;
+        println!("draw path: {}", dag.path_name());
+        let mut chain_renderer = preview::vk::ChainRenderer::new(&device, &chain, &instances)?;
+        let options = preview::bench::BenchOptions {
+            grid: args.grid,
+            frames: args.frames.max(1),
+            full_frames_when_huge: args.full_frames.max(1),
+            width,
+            height,
+            tau: args.tau,
+        };
+        println!(
+            "bench: {}x{} instances of {} triangles ({} source triangles), {}x{}, tau {} px, {} frames",
+            args.grid, args.grid, scene.level0_triangles, scene.level0_triangles * (args.grid as u64).pow(2), width, height, args.tau, options.frames
+        );
+        let mut report = preview::bench::run_bench(&mut dag, &mut chain_renderer, &chain, &scene, &options)?;
+        report["device"] = json!({ "name": info.name, "driver": info.driver, "api_version": info.api_version });
+        report["file"] = json!(args.file.display().to_string());
+        drop(dag);
+        drop(chain_renderer);
+        if let Some(path) = &args.json {
+            std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n").with_context(|| format!("cannot write {}", path.display()))?;
+        }
+        if !args.verify && args.out.is_none() {
+            drop(device);
+            if args.validate {
+                println!("validation messages: {} errors, {} warnings", counts.errors(), counts.warnings());
+                return Ok(if counts.errors() + counts.warnings() == 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE });
+            }
+            return Ok(ExitCode::SUCCESS);
+        }
+    }
     let mut renderer = Renderer::new(&device, &scene, RendererOptions { naive_arithmetic: args.naive_arithmetic, path, ..Default::default() })?;
     println!("draw path: {}", renderer.path_name());
     let mut ok = true;

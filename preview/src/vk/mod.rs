@@ -3,9 +3,11 @@
 //! device (which holds the instance), and [`Device`]'s `Drop` waits idle before destroying it,
 //! so handles always go before their parents.
 
+mod chain;
 mod context;
 mod renderer;
 mod resources;
 
 pub use context::{validation_available, ContextOptions, Device, DeviceInfo, MessageCounts};
 pub use renderer::{DrawPath, Frame, PassTimes, Renderer, RendererOptions, Selection, CLEAR_RGBA, MAX_VISIBLE};
+pub use chain::{ChainFrame, ChainRenderer};

@@ -29,7 +29,7 @@ const DRAW_MESH_SPV: &[u8] = include_bytes!("../../shaders/draw.mesh.spv");
 
 /// Colour attachment format; the read-back bytes are RGBA8.
 pub const COLOR_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
-const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
+pub(crate) const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 /// Background colour (never pure red).
 pub const CLEAR_RGBA: [f32; 4] = [0.16, 0.18, 0.22, 1.0];
 const CULL_GROUP_SIZE: u32 = 64;
@@ -127,6 +127,7 @@ pub struct Renderer {
     index_capacity: u32,
     mesh_path: bool,
     max_groups: u32,
+    no_readback: bool,
     _clusters: Buffer,
     _page_bases: Buffer,
     _pages: Buffer,
@@ -200,11 +201,13 @@ impl Renderer {
         let visible_capacity = options
             .visible_capacity
             .unwrap_or_else(|| (n * instance_count as u64).min(MAX_VISIBLE as u64) as u32)
-            .clamp(1, MAX_VISIBLE);
+            .clamp(1, MAX_VISIBLE)
+            .min((limit / 8) as u32);
         let index_capacity = options
             .index_capacity
             .unwrap_or(if instance_count == 1 { scene.index_capacity } else { (scene.index_capacity * instance_count as u64).min(DEFAULT_INDEX_CAP) })
-            .clamp(3, u32::MAX as u64 / 4) as u32;
+            .clamp(3, u32::MAX as u64 / 4)
+            .min(limit / 4) as u32;
         too_big("decompressed pages", scene.pages.len() as u64)?;
         too_big("index buffer", index_capacity as u64 * 4)?;
         too_big("cluster records", scene.clusters.len() as u64 * 64)?;
@@ -362,6 +365,7 @@ impl Renderer {
             index_capacity,
             mesh_path,
             max_groups,
+            no_readback: false,
             _clusters: clusters,
             _page_bases: page_bases,
             _pages: pages,
@@ -469,6 +473,14 @@ impl Renderer {
     /// reads it back. Front faces are shaded, back faces pure red (the crack test's flag).
     pub fn render(&mut self, view: &GpuView, width: u32, height: u32) -> Result<Frame> {
         self.render_frame(view, width, height, false)
+    }
+
+    /// [`Renderer::render`] without reading the image back (counts and times only).
+    pub fn render_without_readback(&mut self, view: &GpuView, width: u32, height: u32) -> Result<Frame> {
+        self.no_readback = true;
+        let frame = self.render_frame(view, width, height, false);
+        self.no_readback = false;
+        frame
     }
 
     /// [`Renderer::render`], also reading back the depth buffer.
@@ -589,7 +601,9 @@ impl Renderer {
                     image_offset: vk::Offset3D { x: 0, y: 0, z: 0 },
                     image_extent: vk::Extent3D { width: extent.width, height: extent.height, depth: 1 },
                 }];
-                dev.cmd_copy_image_to_buffer(cmd, target.color.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, target.readback.raw, &region);
+                if !self.no_readback {
+                    dev.cmd_copy_image_to_buffer(cmd, target.color.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, target.readback.raw, &region);
+                }
                 if want_depth {
                     let to_copy = [vk::ImageMemoryBarrier2::default()
                         .src_stage_mask(vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS)
@@ -618,7 +632,7 @@ impl Renderer {
         })?;
         let counters = self.read_counters()?;
         let pixels = extent.width as usize * extent.height as usize;
-        let rgba = target.readback.read(pixels * 4)?;
+        let rgba = if self.no_readback { Vec::new() } else { target.readback.read(pixels * 4)? };
         let depth = if want_depth { Some(cast_slice::<u8, f32>(&target.depth_readback.read(pixels * 4)?).to_vec()) } else { None };
         let times = self.read_times()?;
         let clusters = counters.visible_count.min(self.visible_capacity);
@@ -731,7 +745,7 @@ impl Renderer {
 ///
 /// # Safety
 /// `cmd` must be recording, on `dev`.
-unsafe fn barrier(
+pub(crate) unsafe fn barrier(
     dev: &ash::Device,
     cmd: vk::CommandBuffer,
     src_stage: vk::PipelineStageFlags2,
@@ -770,7 +784,7 @@ fn image_barrier<'a>(
 
 /// A device-local buffer holding `data`: written directly where device memory is mapped,
 /// otherwise through a staging buffer pushed onto `uploads` (copied by the caller).
-fn gpu_buffer(
+pub(crate) fn gpu_buffer(
     device: &Arc<Device>,
     data: &[u8],
     usage: vk::BufferUsageFlags,
@@ -787,7 +801,7 @@ fn gpu_buffer(
     Ok(buffer)
 }
 
-fn compute_pipeline(device: &Arc<Device>, layout: &PipelineLayout, spirv: &[u8]) -> Result<Pipeline> {
+pub(crate) fn compute_pipeline(device: &Arc<Device>, layout: &PipelineLayout, spirv: &[u8]) -> Result<Pipeline> {
     let module = ShaderModule::new(device, spirv)?;
     let stage = vk::PipelineShaderStageCreateInfo::default()
         .stage(vk::ShaderStageFlags::COMPUTE)

@@ -1,0 +1,84 @@
+//! The discrete-LOD alternative of the benchmark: the file's level-0 mesh welded by grid
+//! coordinate, then simplified with meshoptimizer (`meshopt::simplify`) to half the triangles
+//! per level, each level with its object-space error (meshopt's relative error × its scale,
+//! made monotone). A renderer picks one level per instance by the same screen-space error rule
+//! as the DAG (coarsest level whose projected error is ≤ τ at the instance's nearest point).
+
+use std::collections::HashMap;
+
+use anyhow::{Context as _, Result};
+use formats::mres::{MresFile, NO_GROUP};
+
+/// One level of the chain: a range of the shared index buffer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChainLevel {
+    /// First index in [`LodChain::indices`].
+    pub first_index: u32,
+    /// Indices of the level (3 per triangle).
+    pub index_count: u32,
+    /// Object-space error (0 for the original).
+    pub error: f32,
+}
+
+/// A welded mesh and its simplified levels, finest first.
+#[derive(Clone, Debug)]
+pub struct LodChain {
+    /// Positions (object space), shared by all levels.
+    pub positions: Vec<[f32; 3]>,
+    /// Indices of all levels, one after the other.
+    pub indices: Vec<u32>,
+    /// The levels, finest (the original) first.
+    pub levels: Vec<ChainLevel>,
+}
+
+impl LodChain {
+    /// Builds the chain from `file`'s level-0 clusters: halves the triangle count per level
+    /// until fewer than `min_triangles` remain, simplification stalls, or 20 levels exist.
+    pub fn build(file: &MresFile, min_triangles: usize) -> Result<LodChain> {
+        let mut weld: HashMap<[i32; 3], u32> = HashMap::new();
+        let mut positions = Vec::new();
+        let mut base = Vec::new();
+        for (p, info) in file.pages.iter().enumerate() {
+            let raw = file.page(p as u32).with_context(|| format!("page {p}"))?;
+            for c in info.first_cluster..info.first_cluster + info.cluster_count {
+                if file.clusters[c as usize].own_group != NO_GROUP {
+                    continue;
+                }
+                let decoded = file.decode_cluster(&raw, c).with_context(|| format!("page {p}"))?;
+                let ids: Vec<u32> = decoded
+                    .positions
+                    .iter()
+                    .map(|&q| {
+                        *weld.entry(q).or_insert_with(|| {
+                            positions.push(file.header.grid.decode(q));
+                            positions.len() as u32 - 1
+                        })
+                    })
+                    .collect();
+                base.extend(decoded.indices.iter().map(|&i| ids[i as usize]));
+            }
+        }
+        let bytes: &[u8] = bytemuck::cast_slice(&positions);
+        let adapter = meshopt::VertexDataAdapter::new(bytes, 12, 0).context("vertex adapter")?;
+        let scale = meshopt::simplify_scale(&adapter);
+        let mut indices = base.clone();
+        let mut levels = vec![ChainLevel { first_index: 0, index_count: base.len() as u32, error: 0.0 }];
+        let mut current = base;
+        let mut error = 0.0f32;
+        while current.len() / 3 >= min_triangles.max(2) && levels.len() < 20 {
+            let target = (current.len() / 2 / 3 * 3).max(3);
+            let mut relative = 0.0f32;
+            let next = meshopt::simplify(&current, &adapter, target, 1.0, meshopt::SimplifyOptions::None, Some(&mut relative));
+            if next.is_empty() || next.len() * 10 > current.len() * 9 {
+                break;
+            }
+            // meshopt's error is relative to the mesh extent, measured from the previous level:
+            // accumulate, so that each level's error covers the way from the original.
+            error = error.max(0.0) + relative * scale;
+            levels.push(ChainLevel { first_index: indices.len() as u32, index_count: next.len() as u32, error });
+            indices.extend_from_slice(&next);
+            current = next;
+        }
+        Ok(LodChain { positions, indices, levels })
+    }
+}
