@@ -2,8 +2,10 @@
 
 use crate::dag::{build_dag, BuildStats};
 use crate::settings::BakeSettings;
+use crate::shard::{build_sharded, ShardSource};
 use crate::weld::weld;
-use formats::import::{import_file, ImportLimits};
+use formats::import::obj_stream::{Corner, ObjVertices, NONE};
+use formats::import::{import_file, ImportLimits, InputKind};
 use formats::SourceMesh;
 use std::path::Path;
 use std::time::Instant;
@@ -70,7 +72,32 @@ pub fn bake_file_with_progress(path: &Path, settings: &BakeSettings, progress: P
     let _span = tracing::info_span!("bake", path = %path.display()).entered();
     let start = Instant::now();
     progress("import");
-    let mesh = import_file(path, &ImportLimits::default())?;
+    let limits = ImportLimits::default();
+    // A large OBJ is read in two streaming passes, so that it never has to fit in memory as
+    // text plus a mesh; if it is large enough to shard, the shards are fed from the file.
+    let size = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    if InputKind::from_path(path) == Some(InputKind::Obj)
+        && size / OBJ_MIN_BYTES_PER_TRIANGLE > settings.shard_triangles
+    {
+        settings.check().map_err(BakeError::Settings)?;
+        let obj = ObjVertices::read(path, &limits)?;
+        if obj.triangles > settings.shard_triangles {
+            let import_seconds = start.elapsed().as_secs_f64();
+            tracing::info!(triangles = obj.triangles, seconds = import_seconds, "streaming import, pass 1");
+            let for_each = |f: &mut dyn FnMut([Corner; 3], u32)| obj.for_each_triangle(path, f);
+            let source = ShardSource {
+                positions: &obj.positions,
+                normals: &obj.normals,
+                uvs: &obj.uvs,
+                triangles: obj.triangles,
+                for_each_triangle: &for_each,
+            };
+            let mut baked = bake_sharded(&source, settings, progress)?;
+            baked.stats.import_seconds = import_seconds;
+            return Ok(baked);
+        }
+    }
+    let mesh = import_file(path, &limits)?;
     let import_seconds = start.elapsed().as_secs_f64();
     tracing::info!(triangles = mesh.triangle_count(), seconds = import_seconds, "imported");
     let mut baked = bake_mesh_with_progress(mesh, settings, progress)?;
@@ -90,6 +117,27 @@ pub fn bake_mesh_with_progress(
     progress: Progress,
 ) -> Result<Baked, BakeError> {
     settings.check().map_err(BakeError::Settings)?;
+    if mesh.triangle_count() as u64 > settings.shard_triangles {
+        let index_or_none = |present: bool| if present { |v: u32| v } else { |_: u32| NONE };
+        let (vn, vt) = (index_or_none(mesh.normals.is_some()), index_or_none(mesh.uvs.is_some()));
+        let for_each = |f: &mut dyn FnMut([Corner; 3], u32)| {
+            for (t, &material) in mesh.indices.chunks_exact(3).zip(&mesh.materials) {
+                f([0, 1, 2].map(|k| Corner { v: t[k], vt: vt(t[k]), vn: vn(t[k]) }), material);
+            }
+            Ok(())
+        };
+        let source = ShardSource {
+            positions: &mesh.positions,
+            normals: mesh.normals.as_deref().unwrap_or_default(),
+            uvs: mesh.uvs.as_deref().unwrap_or_default(),
+            triangles: mesh.triangle_count() as u64,
+            for_each_triangle: &for_each,
+        };
+        let mut baked = bake_sharded(&source, settings, progress)?;
+        baked.stats.degenerate_dropped += mesh.degenerate_dropped;
+        baked.stats.source_triangles += mesh.degenerate_dropped;
+        return Ok(baked);
+    }
     let start = Instant::now();
     progress(&format!("weld: {} triangles", mesh.triangle_count()));
     let welded = weld(&mesh, settings);
@@ -121,4 +169,33 @@ pub fn bake_mesh_with_progress(
         stats: BakeStats { bytes: bytes.len() as u64, build_seconds: start.elapsed().as_secs_f64(), ..stats },
         bytes,
     })
+}
+
+/// The fewest bytes an OBJ triangle takes ("f 1 2 3\n" is 8, before any `v` line): files
+/// smaller than this times `shard_triangles` cannot need sharding and are imported whole.
+const OBJ_MIN_BYTES_PER_TRIANGLE: u64 = 8;
+
+/// Bakes a mesh in shards (see `shard`).
+fn bake_sharded(source: &ShardSource, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
+    let start = Instant::now();
+    let dag = build_sharded(source, settings, progress)?;
+    progress("write");
+    let write_start = Instant::now();
+    let (groups, clusters) = (dag.groups.len() as u64, dag.clusters.len() as u64);
+    let mut build = dag.stats;
+    let bytes = formats::mres::write::write_encoded(&dag.header, &dag.groups, dag.clusters, settings.zstd_level)?;
+    build.stage_seconds.push(("write".into(), write_start.elapsed().as_secs_f64()));
+    tracing::info!(bytes = bytes.len(), groups, clusters, shards = build.shards, stages = ?build.stage_seconds, "baked");
+    let stats = BakeStats {
+        source_triangles: dag.header.source_triangles,
+        degenerate_dropped: dag.degenerate_dropped,
+        welded_vertices: dag.welded_vertices,
+        groups,
+        clusters,
+        build,
+        import_seconds: 0.0,
+        build_seconds: start.elapsed().as_secs_f64(),
+        bytes: bytes.len() as u64,
+    };
+    Ok(Baked { bytes, stats })
 }

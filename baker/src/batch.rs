@@ -62,6 +62,8 @@ pub struct AssetReport {
     pub groups: u64,
     /// Clusters in root groups.
     pub root_clusters: u64,
+    /// Shards the mesh was built in when baked now (0: whole); `null` when it came from the cache.
+    pub shards: Option<u64>,
     /// Bytes of the `.mres` file.
     pub bytes: u64,
     /// Bytes per source triangle.
@@ -152,6 +154,7 @@ impl Batch<'_> {
             clusters: 0,
             groups: 0,
             root_clusters: 0,
+            shards: None,
             bytes: 0,
             bytes_per_input_triangle: 0.0,
             seconds: 0.0,
@@ -175,6 +178,7 @@ impl Batch<'_> {
             }
             let baked = bake_file_with_progress(input, &settings, &|line| (self.stage)(input, line))
                 .map_err(|e| e.to_string())?;
+            report.shards = Some(baked.stats.build.shards);
             if let (Some(cache), Some(key)) = (self.cache, &key) {
                 cache.put(key, &baked.bytes).map_err(|e| format!("cache: {e}"))?;
             }

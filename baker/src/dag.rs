@@ -24,17 +24,17 @@ pub const MAX_ROOT_CLUSTERS: usize = 256;
 const MAX_LEVELS: u32 = 64;
 
 /// One cluster while building.
-struct Cluster {
+pub(crate) struct Cluster {
     /// Triangle list into the welded mesh's vertices.
-    indices: Vec<u32>,
+    pub indices: Vec<u32>,
     /// The group that produced it, or `NO_GROUP`.
-    own_group: u32,
+    pub own_group: u32,
     /// Own sphere: cluster bounds at level 0, the producing group's sphere above.
-    own_sphere: Sphere,
+    pub own_sphere: Sphere,
     /// Own error: 0 at level 0, the producing group's error above.
-    own_error: f32,
+    pub own_error: f32,
     /// The group it belongs to (assigned when its group is simplified or made root).
-    group: u32,
+    pub group: u32,
 }
 
 /// Figures about one build, for reports.
@@ -48,38 +48,116 @@ pub struct BuildStats {
     pub root_groups: u64,
     /// Clusters in the root group(s).
     pub root_clusters: u64,
+    /// Shards the mesh was split into (0: built whole).
+    pub shards: u64,
     /// Wall seconds per stage: level-0 clusters, all simplification levels, encoding.
     pub stage_seconds: Vec<(String, f64)>,
 }
 
+impl BuildStats {
+    /// Adds another build's counters (not its stage times).
+    pub(crate) fn add(&mut self, other: &BuildStats) {
+        for (a, b) in self.methods.iter_mut().zip(other.methods) {
+            *a += b;
+        }
+        self.stuck_groups += other.stuck_groups;
+    }
+}
+
 /// Builds the cluster DAG of a welded mesh.
 pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings, progress: crate::bake::Progress) -> (Dag, BuildStats) {
-    let mut stats = BuildStats::default();
     let mut clock = std::time::Instant::now();
     let mut lap = |stats: &mut BuildStats, stage: &str| {
         stats.stage_seconds.push((stage.to_string(), clock.elapsed().as_secs_f64()));
         clock = std::time::Instant::now();
     };
-    let mut clusters: Vec<Cluster> = level0_clusters(mesh, settings)
+    let mut builder = Builder::new(mesh, settings, level0(mesh, settings), 0, 0);
+    lap(&mut builder.stats, "level 0");
+    progress(&format!("level 0: {} clusters", builder.clusters.len()));
+    while builder.step(progress) {}
+    builder.make_roots();
+    lap(&mut builder.stats, "levels");
+    let mut stats = std::mem::take(&mut builder.stats);
+    let (groups, clusters) = (builder.groups, builder.clusters);
+    let dag = Dag { header: header(mesh, settings), groups, clusters: to_dag_clusters(mesh, clusters) };
+    lap(&mut stats, "encode");
+    (dag, stats)
+}
+
+/// Level-0 clusters of a welded mesh, with their own bounds.
+pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings) -> Vec<Cluster> {
+    level0_clusters(mesh, settings)
         .into_par_iter()
         .map(|indices| {
             let own_sphere = bounding_sphere(&indices, &mesh.positions);
             Cluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP }
         })
-        .collect();
-    let (always_locked, special) = open_and_nonmanifold(mesh);
-    lap(&mut stats, "level 0");
-    progress(&format!("level 0: {} clusters", clusters.len()));
-    let mut groups: Vec<Group> = Vec::new();
-    let mut pending: Vec<usize> = (0..clusters.len()).collect();
-    let mut level = 0u32;
+        .collect()
+}
 
-    loop {
-        if pending.len() <= 1 || level >= MAX_LEVELS {
-            break;
+/// The level loop over one welded mesh: group the pending clusters, simplify each group with
+/// its border locked, split the results into the next level's clusters.
+pub(crate) struct Builder<'a> {
+    mesh: &'a WeldedMesh,
+    settings: &'a BakeSettings,
+    /// Per position id: on an open or non-manifold edge of this mesh, so locked at every level.
+    always_locked: Vec<bool>,
+    /// Open and non-manifold edges with their use counts (see `open_and_nonmanifold`).
+    special: Vec<(u64, u32)>,
+    /// Every cluster built so far.
+    pub clusters: Vec<Cluster>,
+    /// Every group formed so far; ids are `first_group` + index.
+    pub groups: Vec<Group>,
+    /// Id of `groups[0]` in the final DAG.
+    first_group: u32,
+    /// Clusters without a group yet, ascending.
+    pub pending: Vec<usize>,
+    /// The level the next groups get.
+    pub level: u32,
+    pub stats: BuildStats,
+}
+
+impl<'a> Builder<'a> {
+    /// A builder whose pending clusters are `clusters` (triangles into `mesh`); new groups
+    /// start at `level` and get ids from `first_group` on.
+    pub fn new(
+        mesh: &'a WeldedMesh,
+        settings: &'a BakeSettings,
+        clusters: Vec<Cluster>,
+        level: u32,
+        first_group: u32,
+    ) -> Self {
+        let (always_locked, special) = open_and_nonmanifold(mesh);
+        let pending = (0..clusters.len()).collect();
+        let stats = BuildStats::default();
+        Builder {
+            mesh,
+            settings,
+            always_locked,
+            special,
+            clusters,
+            groups: Vec::new(),
+            first_group,
+            pending,
+            level,
+            stats,
         }
-        let refs: Vec<&[u32]> = pending.iter().map(|&c| clusters[c].indices.as_slice()).collect();
-        let centers: Vec<[f32; 3]> = pending.iter().map(|&c| clusters[c].own_sphere.center).collect();
+    }
+
+    /// Triangles in the pending clusters.
+    pub fn pending_triangles(&self) -> usize {
+        self.pending.iter().map(|&c| self.clusters[c].indices.len() / 3).sum()
+    }
+
+    /// Builds one level. Returns false (and changes nothing) when there is nothing left to
+    /// group, and false after a level where no group could be simplified.
+    pub fn step(&mut self, progress: crate::bake::Progress) -> bool {
+        if self.pending.len() <= 1 || self.level >= MAX_LEVELS {
+            return false;
+        }
+        let (mesh, settings, clusters) = (self.mesh, self.settings, &mut self.clusters);
+        let refs: Vec<&[u32]> = self.pending.iter().map(|&c| clusters[c].indices.as_slice()).collect();
+        let centers: Vec<[f32; 3]> = self.pending.iter().map(|&c| clusters[c].own_sphere.center).collect();
         let graph = cluster_graph(&refs, &mesh.position_ids, &centers);
         let parts = partition(&graph, settings.group_size as usize);
         // Which group uses each position; positions used by two groups are locked.
@@ -92,15 +170,17 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings, progress: crate::ba
                 }
             }
         }
+        let always_locked = &self.always_locked;
         let locked = |v: u32| {
             let p = mesh.position_ids[v as usize] as usize;
             owner[p] == u32::MAX - 1 || always_locked[p]
         };
+        let special = &self.special;
         let results: Vec<Option<(Vec<Vec<u32>>, f32, Method)>> = parts
             .par_iter()
             .map(|part| {
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
-                let s = simplify_group(mesh, &merged, locked, &special, settings)?;
+                let s = simplify_group(mesh, &merged, locked, special, settings)?;
                 Some((
                     split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings),
                     s.error,
@@ -113,18 +193,18 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings, progress: crate::ba
         let mut next = Vec::new();
         let mut progressed = false;
         for (part, result) in parts.iter().zip(results) {
-            let members: Vec<usize> = part.iter().map(|&c| pending[c as usize]).collect();
+            let members: Vec<usize> = part.iter().map(|&c| self.pending[c as usize]).collect();
             let Some((children, error, method)) = result else {
-                stats.stuck_groups += 1;
+                self.stats.stuck_groups += 1;
                 next.extend_from_slice(&members);
                 continue;
             };
             progressed = true;
-            stats.methods[method as usize] += 1;
-            let id = groups.len() as u32;
+            self.stats.methods[method as usize] += 1;
+            let id = self.first_group + self.groups.len() as u32;
             let sphere = enclosing_sphere(members.iter().map(|&c| clusters[c].own_sphere));
             let error = members.iter().map(|&c| clusters[c].own_error).fold(error, f32::max);
-            groups.push(Group { sphere, error, level, first_cluster: 0, cluster_count: 0, page: 0 });
+            self.groups.push(Group { sphere, error, level: self.level, first_cluster: 0, cluster_count: 0, page: 0 });
             for &c in &members {
                 clusters[c].group = id;
             }
@@ -140,43 +220,54 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings, progress: crate::ba
             }
         }
         next.sort_unstable();
-        pending = next;
-        let triangles: usize = pending.iter().map(|&c| clusters[c].indices.len() / 3).sum();
-        progress(&format!("level {}: {} clusters, {triangles} triangles", level + 1, pending.len()));
-        tracing::info!(level = level + 1, clusters = pending.len(), triangles, groups = parts.len(), "level built");
-        level += 1;
-        if !progressed {
-            break;
-        }
+        self.pending = next;
+        self.level += 1;
+        let triangles = self.pending_triangles();
+        progress(&format!("level {}: {} clusters, {triangles} triangles", self.level, self.pending.len()));
+        tracing::info!(
+            level = self.level,
+            clusters = self.pending.len(),
+            triangles,
+            groups = parts.len(),
+            "level built"
+        );
+        progressed
     }
 
-    // Root group(s): whatever could not be simplified further. Error +inf: always drawn
-    // when nothing coarser exists.
-    let roots: Vec<Vec<usize>> = if pending.len() <= MAX_ROOT_CLUSTERS {
-        vec![pending.clone()]
-    } else {
-        let refs: Vec<&[u32]> = pending.iter().map(|&c| clusters[c].indices.as_slice()).collect();
-        let centers: Vec<[f32; 3]> = pending.iter().map(|&c| clusters[c].own_sphere.center).collect();
-        let graph = cluster_graph(&refs, &mesh.position_ids, &centers);
-        partition(&graph, settings.group_size as usize)
-            .into_iter()
-            .map(|p| p.into_iter().map(|c| pending[c as usize]).collect())
-            .collect()
-    };
-    stats.root_groups = roots.len() as u64;
-    stats.root_clusters = pending.len() as u64;
-    for members in roots {
-        let id = groups.len() as u32;
-        let sphere = enclosing_sphere(members.iter().map(|&c| clusters[c].own_sphere));
-        groups.push(Group { sphere, error: f32::INFINITY, level, first_cluster: 0, cluster_count: 0, page: 0 });
-        for &c in &members {
-            clusters[c].group = id;
+    /// Makes the pending clusters the root group(s): whatever could not be simplified further.
+    /// Error +inf: always drawn when nothing coarser exists.
+    pub fn make_roots(&mut self) {
+        let pending = std::mem::take(&mut self.pending);
+        let roots: Vec<Vec<usize>> = if pending.len() <= MAX_ROOT_CLUSTERS {
+            vec![pending.clone()]
+        } else {
+            let refs: Vec<&[u32]> = pending.iter().map(|&c| self.clusters[c].indices.as_slice()).collect();
+            let centers: Vec<[f32; 3]> = pending.iter().map(|&c| self.clusters[c].own_sphere.center).collect();
+            let graph = cluster_graph(&refs, &self.mesh.position_ids, &centers);
+            partition(&graph, self.settings.group_size as usize)
+                .into_iter()
+                .map(|p| p.into_iter().map(|c| pending[c as usize]).collect())
+                .collect()
+        };
+        self.stats.root_groups = roots.len() as u64;
+        self.stats.root_clusters = pending.len() as u64;
+        for members in roots {
+            let id = self.first_group + self.groups.len() as u32;
+            let sphere = enclosing_sphere(members.iter().map(|&c| self.clusters[c].own_sphere));
+            let level = self.level;
+            self.groups.push(Group {
+                sphere,
+                error: f32::INFINITY,
+                level,
+                first_cluster: 0,
+                cluster_count: 0,
+                page: 0,
+            });
+            for &c in &members {
+                self.clusters[c].group = id;
+            }
         }
     }
-    lap(&mut stats, "levels");
-    let dag = to_dag(mesh, settings, groups, clusters);
-    lap(&mut stats, "encode");
-    (dag, stats)
 }
 
 /// Triangles per chunk of the level-0 split: chunks are clustered in parallel.
@@ -232,9 +323,8 @@ fn open_and_nonmanifold(mesh: &WeldedMesh) -> (Vec<bool>, Vec<(u64, u32)>) {
     (locked, special)
 }
 
-/// Converts the build result to the logical DAG the writer takes: per cluster, a local vertex
-/// array (grid positions, normals, UVs) and 8-bit local indices.
-fn to_dag(mesh: &WeldedMesh, settings: &BakeSettings, groups: Vec<Group>, clusters: Vec<Cluster>) -> Dag {
+/// The file header for a mesh welded with `settings`.
+pub(crate) fn header(mesh: &WeldedMesh, settings: &BakeSettings) -> Header {
     let mut flags = 0;
     if mesh.normals.is_some() {
         flags |= FLAG_NORMALS;
@@ -245,33 +335,7 @@ fn to_dag(mesh: &WeldedMesh, settings: &BakeSettings, groups: Vec<Group>, cluste
     if mesh.multi_material {
         flags |= FLAG_MATERIALS;
     }
-    let clusters = clusters
-        .into_par_iter()
-        .map(|c| {
-            // Local vertex array and 8-bit indices. (meshopt_optimizeMeshletLevel 3 shrank the
-            // compressed indices by 2% on the sphere but took 17% of the bake: not worth it.)
-            let (vertices, indices) = meshopt::extract_meshlet_indices(&c.indices);
-            let triangle_vertex: Vec<u32> = indices.chunks_exact(3).map(|t| vertices[t[0] as usize]).collect();
-            DagCluster {
-                group: c.group,
-                own_group: c.own_group,
-                positions: vertices.iter().map(|&v| mesh.grid_positions[v as usize]).collect(),
-                normals: mesh
-                    .normals
-                    .as_ref()
-                    .map(|n| vertices.iter().map(|&v| n[v as usize]).collect())
-                    .unwrap_or_default(),
-                uvs: mesh.uvs.as_ref().map(|u| vertices.iter().map(|&v| u[v as usize]).collect()).unwrap_or_default(),
-                materials: if mesh.multi_material {
-                    triangle_vertex.iter().map(|&v| mesh.materials[v as usize].min(u16::MAX as u32) as u16).collect()
-                } else {
-                    Vec::new()
-                },
-                indices,
-            }
-        })
-        .collect();
-    let header = Header {
+    Header {
         flags,
         grid: mesh.grid,
         uv: mesh.uv,
@@ -279,6 +343,32 @@ fn to_dag(mesh: &WeldedMesh, settings: &BakeSettings, groups: Vec<Group>, cluste
         position_bits: settings.position_bits,
         level_count: 0,
         source_triangles: mesh.source_triangles,
-    };
-    Dag { header, groups, clusters }
+    }
+}
+
+/// Converts built clusters to the writer's logical clusters: per cluster, a local vertex
+/// array (grid positions, normals, UVs) and 8-bit local indices.
+pub(crate) fn to_dag_clusters(mesh: &WeldedMesh, clusters: Vec<Cluster>) -> Vec<DagCluster> {
+    clusters.into_par_iter().map(|c| to_dag_cluster(mesh, &c)).collect()
+}
+
+/// One cluster in the writer's form.
+pub(crate) fn to_dag_cluster(mesh: &WeldedMesh, c: &Cluster) -> DagCluster {
+    // Local vertex array and 8-bit indices. (meshopt_optimizeMeshletLevel 3 shrank the
+    // compressed indices by 2% on the sphere but took 17% of the bake: not worth it.)
+    let (vertices, indices) = meshopt::extract_meshlet_indices(&c.indices);
+    let triangle_vertex: Vec<u32> = indices.chunks_exact(3).map(|t| vertices[t[0] as usize]).collect();
+    DagCluster {
+        group: c.group,
+        own_group: c.own_group,
+        positions: vertices.iter().map(|&v| mesh.grid_positions[v as usize]).collect(),
+        normals: mesh.normals.as_ref().map(|n| vertices.iter().map(|&v| n[v as usize]).collect()).unwrap_or_default(),
+        uvs: mesh.uvs.as_ref().map(|u| vertices.iter().map(|&v| u[v as usize]).collect()).unwrap_or_default(),
+        materials: if mesh.multi_material {
+            triangle_vertex.iter().map(|&v| mesh.materials[v as usize].min(u16::MAX as u32) as u16).collect()
+        } else {
+            Vec::new()
+        },
+        indices,
+    }
 }

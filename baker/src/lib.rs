@@ -15,6 +15,7 @@ pub mod generate;
 pub mod honesty;
 pub mod partition;
 pub mod settings;
+pub mod shard;
 pub mod simplify;
 pub mod validate;
 pub mod weld;

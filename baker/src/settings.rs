@@ -29,6 +29,9 @@ pub struct BakeSettings {
     pub uv_weight: f32,
     /// Write: zstd level of the pages (1..=22).
     pub zstd_level: i32,
+    /// Shard: a mesh with more triangles than this is split spatially into shards of about
+    /// this many, built one after the other and merged in the upper levels (≥ 1000).
+    pub shard_triangles: u64,
     /// Keep normals from the source (if it has them).
     pub keep_normals: bool,
     /// Keep UVs from the source (if it has them).
@@ -55,6 +58,9 @@ impl Default for BakeSettings {
             // zstd 9 on headers and indices (positions and normals, near-random, always use level 1):
             // level 15 is 1.3% smaller but its binary-tree matcher costs ~10% of the bake time.
             zstd_level: 9,
+            // A 2M-triangle shard takes about 0.3 GB to build: two at a time fit anywhere, and
+            // larger shards would only lengthen the locked border band (see shard.rs).
+            shard_triangles: 2_000_000,
             keep_normals: true,
             keep_uvs: true,
         }
@@ -77,6 +83,9 @@ impl BakeSettings {
         range("max_vertices", self.max_vertices, 3 * 4, 256)?;
         range("group_size", self.group_size, 2, 64)?;
         range("zstd_level", self.zstd_level.max(0) as u32, 1, 22)?;
+        if self.shard_triangles < 1000 {
+            return Err(format!("shard_triangles = {} must be at least 1000", self.shard_triangles));
+        }
         if self.max_triangles % 4 != 0 {
             return Err(format!("max_triangles = {} must be a multiple of 4", self.max_triangles));
         }

@@ -42,9 +42,16 @@ pub struct WeldedMesh {
 pub fn weld(mesh: &SourceMesh, settings: &BakeSettings) -> Option<WeldedMesh> {
     let (lo, hi) = mesh.bounds()?;
     let grid = Grid::covering(lo, hi, settings.position_bits);
-    let normals = mesh.normals.as_ref().filter(|_| settings.keep_normals);
     let uvs = mesh.uvs.as_ref().filter(|_| settings.keep_uvs);
     let uv = uv_quant(uvs.map(|v| v.as_slice()).unwrap_or(&[]));
+    Some(weld_on(mesh, settings, grid, uv))
+}
+
+/// [`weld`] on a given grid and UV quantization (a shard of a larger mesh uses the whole
+/// mesh's, so that shards meet exactly).
+pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQuant) -> WeldedMesh {
+    let normals = mesh.normals.as_ref().filter(|_| settings.keep_normals);
+    let uvs = mesh.uvs.as_ref().filter(|_| settings.keep_uvs);
 
     // Welding units: source vertices, or (source vertex, material) pairs when a vertex can be
     // used by triangles of several materials (a vertex never spans two materials).
@@ -136,10 +143,11 @@ pub fn weld(mesh: &SourceMesh, settings: &BakeSettings) -> Option<WeldedMesh> {
         .collect();
     out.indices = triangles.iter().flatten().flatten().copied().collect();
     out.degenerate_dropped += triangles.iter().filter(|t| t.is_none()).count() as u64;
-    Some(out)
+    out
 }
 
-fn uv_quant(uvs: &[[f32; 2]]) -> UvQuant {
+/// The UV quantization covering `uvs`.
+pub fn uv_quant(uvs: &[[f32; 2]]) -> UvQuant {
     let mut min = [f32::INFINITY; 2];
     let mut max = [f32::NEG_INFINITY; 2];
     for uv in uvs {

@@ -169,11 +169,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
         let line = match &r.error {
             Some(e) => format!("[{n}/{total}] FAILED {}", e),
             None => format!(
-                "[{n}/{total}] {} {}: {} triangles, {} levels, {} clusters, {:.2} B/tri, {:.2}s",
+                "[{n}/{total}] {} {}: {} triangles, {} levels{}, {} clusters, {:.2} B/tri, {:.2}s",
                 r.status,
                 r.input.display(),
                 r.input_triangles,
                 r.levels,
+                match r.shards {
+                    Some(s) if s > 0 => format!(" ({s} shards)"),
+                    _ => String::new(),
+                },
                 r.clusters,
                 r.bytes_per_input_triangle,
                 r.seconds

@@ -45,6 +45,7 @@
 
 mod gltf;
 mod obj;
+pub mod obj_stream;
 
 use std::fs::File;
 use std::io::Read;
@@ -387,7 +388,7 @@ impl MeshBuilder {
 }
 
 /// `v` scaled to unit length, or zero if that is not possible (zero, tiny or non-finite).
-fn unit_or_zero(v: [f32; 3]) -> [f32; 3] {
+pub(crate) fn unit_or_zero(v: [f32; 3]) -> [f32; 3] {
     let length = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     if length.is_finite() && length > 0.0 {
         let unit = v.map(|c| c / length);

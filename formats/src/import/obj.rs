@@ -37,7 +37,7 @@ struct Scan {
 }
 
 /// Element kinds a face index can refer to, in the order of the `v/vt/vn` slots.
-const SLOTS: [&str; 3] = ["vertex position", "texture coordinate", "normal"];
+pub(super) const SLOTS: [&str; 3] = ["vertex position", "texture coordinate", "normal"];
 
 /// The UTF-8 byte order mark some editors put at the start of a text file.
 const BOM: &str = "\u{feff}";
@@ -177,7 +177,8 @@ fn scan(text: &str) -> KindResult<Scan> {
             "f" => {
                 let mut corners = 0u64;
                 for vertex in words {
-                    check_face_vertex(vertex, line_no, &counts, &mut max_positive)?;
+                    // Resolved as tobj will: relative indices against the counts so far.
+                    super::obj_stream::corner(vertex, line_no, &counts, Some(&mut max_positive))?;
                     corners += 1;
                 }
                 scan.triangles += corners.saturating_sub(2);
@@ -193,35 +194,6 @@ fn scan(text: &str) -> KindResult<Scan> {
     Ok(scan)
 }
 
-/// Checks one `v/vt/vn` face vertex as `tobj` will resolve it, given the element counts so far.
-fn check_face_vertex(
-    vertex: &str,
-    line_no: usize,
-    counts: &[u64; 3],
-    max_positive: &mut [(u64, usize); 3],
-) -> KindResult<()> {
-    for (slot, part) in vertex.split('/').enumerate() {
-        if part.is_empty() {
-            if slot == 0 {
-                return Err(parse_error(line_no, "face vertex without a position index"));
-            }
-            continue;
-        }
-        let (Some(_), Ok(index)) = (SLOTS.get(slot), part.parse::<isize>()) else {
-            return Err(parse_error(line_no, &format!("bad face vertex {vertex:?}")));
-        };
-        let count = counts[slot];
-        let magnitude = index.unsigned_abs() as u64;
-        if index == 0 || (index < 0 && magnitude > count) {
-            return Err(out_of_range(line_no, slot, index as i64, count));
-        }
-        if index > 0 && magnitude > max_positive[slot].0 {
-            max_positive[slot] = (magnitude, line_no);
-        }
-    }
-    Ok(())
-}
-
 /// Reports a `v` line whose coordinates parse but are NaN or infinite.
 fn check_finite_vertex(words: std::str::SplitWhitespace<'_>, line_no: usize) -> KindResult<()> {
     let coordinates: Vec<f32> = words.take(3).filter_map(|w| w.parse().ok()).collect();
@@ -232,11 +204,11 @@ fn check_finite_vertex(words: std::str::SplitWhitespace<'_>, line_no: usize) -> 
     Ok(())
 }
 
-fn parse_error(line_no: usize, message: &str) -> ImportErrorKind {
+pub(super) fn parse_error(line_no: usize, message: &str) -> ImportErrorKind {
     ImportErrorKind::Parse(format!("line {line_no}: {message}"))
 }
 
-fn out_of_range(line_no: usize, slot: usize, index: i64, count: u64) -> ImportErrorKind {
+pub(super) fn out_of_range(line_no: usize, slot: usize, index: i64, count: u64) -> ImportErrorKind {
     ImportErrorKind::IndexOutOfRange { what: format!("line {line_no}: {}", SLOTS[slot]), index, count }
 }
 

@@ -26,42 +26,59 @@ pub enum WriteError {
 
 /// Serializes `dag` to a complete `.mres` file; pages are compressed with zstd at `level`.
 pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
-    let layout = Layout::new(dag)?;
-    let header_flags = dag.header.flags;
-    let encoded: Vec<EncodedCluster> = layout
-        .cluster_order
+    let clusters: Vec<EncodedCluster> = dag
+        .clusters
         .par_iter()
-        .map(|&c| encode_cluster(&dag.clusters[c], &dag.header, header_flags, c))
+        .enumerate()
+        .map(|(i, c)| EncodedCluster::new(c, &dag.header, i))
         .collect::<Result<_, _>>()?;
-    let pages = pack_pages(&layout, &encoded);
+    write_encoded(&dag.header, &dag.groups, clusters, level)
+}
+
+/// [`write_mres`] for clusters already encoded with [`EncodedCluster::new`] (a large bake
+/// keeps its finished clusters in this compact form). Consumes them, so that their memory is
+/// freed as the pages are built.
+pub fn write_encoded(
+    header: &Header,
+    groups: &[Group],
+    encoded: Vec<EncodedCluster>,
+    level: i32,
+) -> Result<Vec<u8>, WriteError> {
+    let layout = Layout::new(groups, &encoded)?;
+    let pages = pack_pages(&layout, &encoded, level)?;
 
     // Renumbered hierarchy.
-    let mut groups = Vec::with_capacity(dag.groups.len());
-    let mut clusters = Vec::with_capacity(dag.clusters.len());
-    let mut page_offsets = vec![0u32; dag.clusters.len()];
+    let mut new_groups = Vec::with_capacity(groups.len());
+    let mut clusters = Vec::with_capacity(encoded.len());
+    let mut page_offsets = vec![0u32; encoded.len()];
     for page in &pages {
         for (c, offset) in page.cluster_offsets.iter().enumerate() {
             page_offsets[page.first_cluster as usize + c] = *offset;
         }
     }
     for (new_g, &old_g) in layout.group_order.iter().enumerate() {
-        let g = &dag.groups[old_g];
+        let g = &groups[old_g];
         let (first, count) = layout.group_ranges[new_g];
-        groups.push(Group { first_cluster: first, cluster_count: count, page: layout.group_page(&pages, new_g), ..*g });
+        new_groups.push(Group {
+            first_cluster: first,
+            cluster_count: count,
+            page: layout.group_page(&pages, new_g),
+            ..*g
+        });
     }
     for (new_c, &old_c) in layout.cluster_order.iter().enumerate() {
-        let c = &dag.clusters[old_c];
+        let c = &encoded[old_c];
         clusters.push(ClusterInfo {
             group: layout.group_new[c.group as usize],
             own_group: if c.own_group == NO_GROUP { NO_GROUP } else { layout.group_new[c.own_group as usize] },
-            vertex_count: c.positions.len() as u16,
-            triangle_count: (c.indices.len() / 3) as u16,
+            vertex_count: u16::from_le_bytes([c.header[0], c.header[1]]),
+            triangle_count: u16::from_le_bytes([c.header[2], c.header[3]]),
             page_offset: page_offsets[new_c],
         });
     }
+    drop(encoded);
+    let groups = new_groups;
     let dependencies = page_dependencies(&pages, &groups, &clusters);
-
-    let frames: Vec<Vec<u8>> = pages.par_iter().map(|p| compress_page(p, level)).collect::<Result<_, _>>()?;
 
     let mut hierarchy = Vec::new();
     for g in &groups {
@@ -86,10 +103,11 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
     let mut offset = page_table_offset + page_table_size;
     let mut table = Vec::new();
     let mut dep_first = 0u32;
-    for ((page, frame), deps) in pages.iter().zip(&frames).zip(&dependencies) {
+    for (page, deps) in pages.iter().zip(&dependencies) {
+        let frame = &page.frame;
         table.extend_from_slice(&offset.to_le_bytes());
         table.extend_from_slice(&(frame.len() as u32).to_le_bytes());
-        table.extend_from_slice(&(page.raw.len() as u32).to_le_bytes());
+        table.extend_from_slice(&(page.raw_size as u32).to_le_bytes());
         table.extend_from_slice(blake3::hash(frame).as_bytes());
         for v in
             [page.first_cluster, page.cluster_count, page.first_group, page.group_count, dep_first, deps.len() as u32]
@@ -104,7 +122,7 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
     }
 
     let level_count = groups.iter().map(|g| g.level + 1).max().unwrap_or(0);
-    let h = &dag.header;
+    let h = header;
     let mut out = Vec::with_capacity(offset as usize);
     out.extend_from_slice(&MAGIC);
     for v in [VERSION, HEADER_SIZE as u32, h.flags] {
@@ -128,8 +146,9 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
     out.resize(HEADER_SIZE, 0);
     out.extend_from_slice(&hierarchy);
     out.extend_from_slice(&table);
-    for frame in &frames {
-        out.extend_from_slice(frame);
+    // Each page's frame is freed once copied: the frames and the file are not both held whole.
+    for page in pages {
+        out.extend_from_slice(&page.frame);
     }
     Ok(out)
 }
@@ -162,10 +181,10 @@ struct Layout {
 }
 
 impl Layout {
-    fn new(dag: &Dag) -> Result<Layout, WriteError> {
-        let n = dag.groups.len();
+    fn new(groups: &[Group], clusters: &[EncodedCluster]) -> Result<Layout, WriteError> {
+        let n = groups.len();
         let mut members: Vec<Vec<usize>> = vec![Vec::new(); n];
-        for (i, c) in dag.clusters.iter().enumerate() {
+        for (i, c) in clusters.iter().enumerate() {
             let g = c.group as usize;
             if g >= n || (c.own_group != NO_GROUP && c.own_group as usize >= n) {
                 return Err(WriteError::BadDag(format!("cluster {i} refers to a missing group")));
@@ -174,9 +193,9 @@ impl Layout {
         }
         let mut group_order: Vec<usize> = (0..n).collect();
         // Coarse to fine: a prefix of the file is a valid coarse model.
-        group_order.sort_by_key(|&g| (std::cmp::Reverse(dag.groups[g].level), g));
+        group_order.sort_by_key(|&g| (std::cmp::Reverse(groups[g].level), g));
         let mut group_new = vec![0u32; n];
-        let mut cluster_order = Vec::with_capacity(dag.clusters.len());
+        let mut cluster_order = Vec::with_capacity(clusters.len());
         let mut group_ranges = Vec::with_capacity(n);
         for (new_g, &g) in group_order.iter().enumerate() {
             if members[g].is_empty() {
@@ -200,31 +219,34 @@ impl Layout {
 /// the well-compressing indices share tables with the near-random bit-packed positions.
 /// The bit-packed positions and normals (sections 1 and 2) are near-random: they get zstd's
 /// fastest level, which compresses them as well as level 19 does.
-fn compress_page(page: &PageBuild, level: i32) -> std::io::Result<Vec<u8>> {
+fn compress_page(raw: &[u8], sections: &[usize], level: i32) -> std::io::Result<Vec<u8>> {
     let mut out = Vec::new();
-    for (section, w) in page.sections.windows(2).enumerate() {
+    for (section, w) in sections.windows(2).enumerate() {
         if w[1] > w[0] {
             let level = if section == 1 || section == 2 { 1 } else { level };
-            out.extend_from_slice(&zstd::bulk::compress(&page.raw[w[0]..w[1]], level)?);
+            out.extend_from_slice(&zstd::bulk::compress(&raw[w[0]..w[1]], level)?);
         }
     }
     Ok(out)
 }
 
+/// One page: its compressed frame and where it sits in the hierarchy.
 struct PageBuild {
-    raw: Vec<u8>,
-    /// Section boundaries in `raw`: 0, end of headers, end of each block kind.
-    sections: Vec<usize>,
+    /// The page's zstd frames (one per section).
+    frame: Vec<u8>,
+    /// Length of the decompressed page.
+    raw_size: usize,
     first_cluster: u32,
     cluster_count: u32,
     first_group: u32,
     group_count: u32,
-    /// Offset of each cluster's header within `raw`.
+    /// Offset of each cluster's header within the decompressed page.
     cluster_offsets: Vec<u32>,
 }
 
 /// Greedily fills pages with whole groups in coarse-to-fine order.
-fn pack_pages(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageBuild> {
+/// Each page is assembled and compressed on one thread and only its frame is kept.
+fn pack_pages(layout: &Layout, encoded: &[EncodedCluster], level: i32) -> std::io::Result<Vec<PageBuild>> {
     // Page boundaries first (cheap, sequential), then the pages themselves in parallel.
     let mut spans = Vec::new();
     let mut start_group = 0usize;
@@ -233,7 +255,8 @@ fn pack_pages(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageBuild> {
         let mut size = 0usize;
         while end_group < layout.group_ranges.len() {
             let (first, count) = layout.group_ranges[end_group];
-            let group_size: usize = (first..first + count).map(|c| encoded[c as usize].size()).sum();
+            let group_size: usize =
+                (first..first + count).map(|c| encoded[layout.cluster_order[c as usize]].size()).sum();
             if end_group > start_group && size + group_size > PAGE_TARGET_RAW_SIZE {
                 break;
             }
@@ -249,12 +272,12 @@ fn pack_pages(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageBuild> {
             let first_cluster = layout.group_ranges[start_group].0;
             let (last_first, last_count) = layout.group_ranges[end_group - 1];
             let cluster_count = last_first + last_count - first_cluster;
-            assemble_page(
-                &encoded[first_cluster as usize..(first_cluster + cluster_count) as usize],
-                first_cluster,
-                start_group as u32,
-                (end_group - start_group) as u32,
-            )
+            let clusters: Vec<&EncodedCluster> = layout.cluster_order
+                [first_cluster as usize..(first_cluster + cluster_count) as usize]
+                .iter()
+                .map(|&c| &encoded[c])
+                .collect();
+            assemble_page(&clusters, first_cluster, start_group as u32, (end_group - start_group) as u32, level)
         })
         .collect()
 }
@@ -262,13 +285,19 @@ fn pack_pages(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageBuild> {
 /// Lays out a page: all cluster headers first, then the data blocks grouped by kind (every
 /// cluster's positions, then every cluster's normals, UVs, indices, materials), so that zstd
 /// sees like data together. Header offsets are rebased from cluster-relative to page-relative.
-fn assemble_page(clusters: &[EncodedCluster], first_cluster: u32, first_group: u32, group_count: u32) -> PageBuild {
+fn assemble_page(
+    clusters: &[&EncodedCluster],
+    first_cluster: u32,
+    first_group: u32,
+    group_count: u32,
+    level: i32,
+) -> std::io::Result<PageBuild> {
     let mut raw = vec![0u8; clusters.len() * CLUSTER_HEADER_SIZE];
     let mut headers: Vec<[u8; CLUSTER_HEADER_SIZE]> = clusters.iter().map(|c| c.header).collect();
     let mut sections = vec![0, raw.len()];
     for slot in 0..BLOCK_KINDS {
         for (c, header) in clusters.iter().zip(&mut headers) {
-            if let Some(block) = &c.blocks[slot] {
+            if let Some(block) = c.block(slot) {
                 let at = 20 + slot * 4;
                 header[at..at + 4].copy_from_slice(&(raw.len() as u32).to_le_bytes());
                 raw.extend_from_slice(block);
@@ -283,34 +312,82 @@ fn assemble_page(clusters: &[EncodedCluster], first_cluster: u32, first_group: u
         raw[at..at + CLUSTER_HEADER_SIZE].copy_from_slice(header);
         cluster_offsets.push(at as u32);
     }
-    PageBuild {
-        raw,
-        sections,
+    Ok(PageBuild {
+        frame: compress_page(&raw, &sections, level)?,
+        raw_size: raw.len(),
         first_cluster,
         cluster_count: clusters.len() as u32,
         first_group,
         group_count,
         cluster_offsets,
-    }
+    })
 }
 
 /// Data block kinds, in page order: positions, normals, UVs, indices, materials.
 const BLOCK_KINDS: usize = 5;
 
-/// One cluster's header (offsets not yet set) and data blocks.
-struct EncodedCluster {
+/// One cluster encoded for its page: header (block offsets not yet set) and data blocks, with
+/// the cluster's place in the DAG. Compact: a large bake holds its finished clusters so.
+pub struct EncodedCluster {
+    /// Index of the group it belongs to.
+    pub group: u32,
+    /// Index of the group that produced it, or [`NO_GROUP`].
+    pub own_group: u32,
     header: [u8; CLUSTER_HEADER_SIZE],
-    blocks: [Option<Vec<u8>>; BLOCK_KINDS],
+    /// The blocks, one after the other (each padded to 4 bytes).
+    data: Box<[u8]>,
+    /// End of each block in `data`.
+    ends: [u32; BLOCK_KINDS],
+    /// Bit `k`: the cluster has a block of kind `k` (possibly empty).
+    present: u8,
 }
 
 impl EncodedCluster {
+    /// Encodes `c` for a file with `header`; `index` names the cluster in errors.
+    pub fn new(c: &DagCluster, header: &Header, index: usize) -> Result<EncodedCluster, WriteError> {
+        let blocks = encode_blocks(c, header, index)?;
+        let (header_bytes, blocks) = blocks;
+        let mut data = Vec::new();
+        let mut ends = [0u32; BLOCK_KINDS];
+        let mut present = 0u8;
+        for (slot, block) in blocks.iter().enumerate() {
+            if let Some(b) = block {
+                data.extend_from_slice(b);
+                data.resize(data.len().next_multiple_of(4), 0);
+                present |= 1 << slot;
+            }
+            ends[slot] = data.len() as u32;
+        }
+        Ok(EncodedCluster {
+            group: c.group,
+            own_group: c.own_group,
+            header: header_bytes,
+            data: data.into(),
+            ends,
+            present,
+        })
+    }
+
+    /// The block of kind `slot` (padded), if the cluster has one.
+    fn block(&self, slot: usize) -> Option<&[u8]> {
+        let start = if slot == 0 { 0 } else { self.ends[slot - 1] as usize };
+        let end = self.ends[slot] as usize;
+        (self.present & (1 << slot) != 0).then(|| &self.data[start..end])
+    }
+
     fn size(&self) -> usize {
-        CLUSTER_HEADER_SIZE + self.blocks.iter().flatten().map(|b| b.len().next_multiple_of(4)).sum::<usize>()
+        CLUSTER_HEADER_SIZE + self.data.len()
     }
 }
 
 /// Encodes one cluster: its header (block offsets filled in by [`assemble_page`]) and blocks.
-fn encode_cluster(c: &DagCluster, h: &Header, flags: u32, index: usize) -> Result<EncodedCluster, WriteError> {
+#[allow(clippy::type_complexity)]
+fn encode_blocks(
+    c: &DagCluster,
+    h: &Header,
+    index: usize,
+) -> Result<([u8; CLUSTER_HEADER_SIZE], [Option<Vec<u8>>; BLOCK_KINDS]), WriteError> {
+    let flags = h.flags;
     let bad = |problem: String| WriteError::BadCluster { cluster: index, problem };
     let vertex_count = c.positions.len();
     let triangle_count = c.indices.len() / 3;
@@ -357,7 +434,7 @@ fn encode_cluster(c: &DagCluster, h: &Header, flags: u32, index: usize) -> Resul
     if flags & FLAG_MATERIALS != 0 {
         blocks[4] = Some(c.materials.iter().flat_map(|m| m.to_le_bytes()).collect());
     }
-    Ok(EncodedCluster { header, blocks })
+    Ok((header, blocks))
 }
 
 /// Packs N-component integer vectors as offsets from their per-component minimum, each

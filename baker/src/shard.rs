@@ -1,0 +1,474 @@
+//! Sharding: a mesh with more than `shard_triangles` triangles is split spatially into shards
+//! that are built one by one (in parallel as threads allow), then merged in the upper levels
+//! into one DAG with one root (DESIGN.md pipeline: "shard if large (spatial, borders locked)").
+//!
+//! 1. **Cells.** A k-d tree over (a sample of) the vertex positions, split at medians along
+//!    the longest axis until a cell holds about `shard_triangles` triangles' worth of vertices.
+//! 2. **Spill.** The triangles are streamed (from the OBJ file itself for a streamed import,
+//!    see `formats::import::obj_stream`) and each is appended to its cell's spill file in a
+//!    temporary directory, by centroid. Only the vertex attributes stay in memory.
+//! 3. **Shards.** Each shard is read back, welded on the whole mesh's grid (so that shards
+//!    meet exactly) and built level by level like a whole mesh. Its edges on the shard border
+//!    are open in the shard, so they are locked at every shard level like any open edge. A
+//!    shard stops when a level removes less than [`SHARD_STOP_REDUCTION`] of its triangles
+//!    (what is left is mostly the locked border band) or it is down to a few groups. Its
+//!    finished clusters are encoded right away (compact); its top clusters are kept.
+//! 4. **Merge.** The top clusters of all shards are welded into one small mesh, where the shard
+//!    borders are ordinary interior edges, and the level loop goes on to one root. So no edge
+//!    stays locked for good: a shard border is simplified in the first merged levels.
+//!
+//! Peak memory is the vertex attributes (12–32 bytes per vertex), the encoded clusters (about
+//! the size of the output), and the working set of the shards being built — not the whole
+//! mesh's build. Output is deterministic: cells, spill order and shard results depend only on
+//! the input and the settings, never on the thread count.
+
+use crate::bake::{BakeError, Progress};
+use crate::dag::{header, level0, to_dag_cluster, BuildStats, Builder, Cluster};
+use crate::settings::BakeSettings;
+use crate::weld::{uv_quant, weld_on, WeldedMesh};
+use formats::import::obj_stream::{Corner, NONE};
+use formats::import::ImportError;
+use formats::mres::write::EncodedCluster;
+use formats::mres::{DagCluster, Grid, Group, Header, Sphere, UvQuant, NO_GROUP};
+use formats::SourceMesh;
+use rayon::prelude::*;
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::Path;
+
+/// A shard stops building levels once a level keeps more than this fraction of its triangles.
+pub const SHARD_STOP_REDUCTION: f64 = 0.75;
+
+/// Most vertices sampled to place the cell boundaries.
+const CELL_SAMPLE: usize = 1 << 20;
+
+/// The vertex attributes of a mesh to shard, and a way to stream its triangles.
+pub struct ShardSource<'a> {
+    /// Positions (finite).
+    pub positions: &'a [[f32; 3]],
+    /// Normals, or empty.
+    pub normals: &'a [[f32; 3]],
+    /// UVs, or empty.
+    pub uvs: &'a [[f32; 2]],
+    /// Triangles to stream (an estimate is fine: it only sizes the cells).
+    pub triangles: u64,
+    /// Calls its argument with every triangle's corners (attributes absent: [`NONE`]) and
+    /// material, always in the same order.
+    #[allow(clippy::type_complexity)]
+    pub for_each_triangle: &'a (dyn Fn(&mut dyn FnMut([Corner; 3], u32)) -> Result<(), ImportError> + Sync),
+}
+
+/// The DAG of a sharded build, with its clusters already encoded.
+pub struct ShardedDag {
+    /// File header.
+    pub header: Header,
+    /// All groups.
+    pub groups: Vec<Group>,
+    /// All clusters.
+    pub clusters: Vec<EncodedCluster>,
+    /// Figures.
+    pub stats: BuildStats,
+    /// Welded vertices over all shards (shard-border vertices counted in each shard).
+    pub welded_vertices: u64,
+    /// Triangles dropped as degenerate.
+    pub degenerate_dropped: u64,
+}
+
+/// One bytes-per-triangle record of a spill file: three corners (v, vt, vn) and the material.
+const RECORD: usize = 40;
+
+/// Builds the DAG of `source` in shards of about `settings.shard_triangles` triangles.
+pub fn build_sharded(
+    source: &ShardSource,
+    settings: &BakeSettings,
+    progress: Progress,
+) -> Result<ShardedDag, BakeError> {
+    let mut stats = BuildStats::default();
+    let mut clock = std::time::Instant::now();
+    let mut lap = |stats: &mut BuildStats, stage: &str| {
+        stats.stage_seconds.push((stage.to_string(), clock.elapsed().as_secs_f64()));
+        clock = std::time::Instant::now();
+    };
+    let (lo, hi) = bounds(source.positions).ok_or(BakeError::Empty(0))?;
+    let grid = Grid::covering(lo, hi, settings.position_bits);
+    let keep_uvs = settings.keep_uvs && !source.uvs.is_empty();
+    let keep_normals = settings.keep_normals && !source.normals.is_empty();
+    let uv = if keep_uvs { uv_quant(source.uvs) } else { uv_quant(&[]) };
+    let cells = Cells::new(source, settings.shard_triangles);
+    progress(&format!("shard: {} cells", cells.count()));
+
+    // Spill every triangle to its cell's file.
+    let dir = tempfile::Builder::new().prefix("mres-shards-").tempdir().map_err(spill_error)?;
+    let mut writers: Vec<BufWriter<File>> = (0..cells.count())
+        .map(|s| File::create(dir.path().join(format!("{s}.bin"))).map(|f| BufWriter::with_capacity(1 << 16, f)))
+        .collect::<Result<_, _>>()
+        .map_err(spill_error)?;
+    let mut io_error = None;
+    let mut degenerate = 0u64;
+    let mut kept = 0u64;
+    let mut first_material = None;
+    let mut multi_material = false;
+    (source.for_each_triangle)(&mut |t, material| {
+        let p = t.map(|c| source.positions[c.v as usize]);
+        if p[0] == p[1] || p[1] == p[2] || p[0] == p[2] {
+            degenerate += 1;
+            return;
+        }
+        multi_material |= *first_material.get_or_insert(material) != material;
+        let centroid = [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k]) / 3.0);
+        let mut record = [0u8; RECORD];
+        let words = t.iter().flat_map(|c| [c.v, c.vt, c.vn]).chain([material]);
+        for (chunk, w) in record.chunks_exact_mut(4).zip(words) {
+            chunk.copy_from_slice(&w.to_le_bytes());
+        }
+        if let Err(e) = writers[cells.cell_of(centroid)].write_all(&record) {
+            io_error.get_or_insert(e);
+        }
+        kept += 1;
+    })?;
+    for w in &mut writers {
+        if let Err(e) = w.flush() {
+            io_error.get_or_insert(e);
+        }
+    }
+    drop(writers);
+    if let Some(e) = io_error {
+        return Err(spill_error(e));
+    }
+    if kept == 0 {
+        return Err(BakeError::Empty(degenerate));
+    }
+    lap(&mut stats, "spill");
+
+    // Build the shards.
+    let context = ShardContext { source, settings, grid, uv, keep_normals, keep_uvs, multi_material };
+    let shards: Vec<ShardResult> = (0..cells.count())
+        .into_par_iter()
+        .map(|s| {
+            let result = context.build(&dir.path().join(format!("{s}.bin")));
+            if let Ok(r) = &result {
+                progress(&format!(
+                    "shard {}/{}: {} triangles, {} levels, {} top clusters",
+                    s + 1,
+                    cells.count(),
+                    r.triangles,
+                    r.levels,
+                    r.top.len()
+                ));
+            }
+            result
+        })
+        .collect::<Result<_, _>>()?;
+    drop(dir);
+    lap(&mut stats, "shards");
+
+    // Merge: shard groups and clusters under global ids, then the levels above the shards.
+    let mut groups: Vec<Group> = Vec::new();
+    let mut encoded: Vec<EncodedCluster> = Vec::new();
+    let mut top: Vec<TopCluster> = Vec::new();
+    let mut welded_vertices = 0;
+    let mut level = 0;
+    stats.shards = shards.len() as u64;
+    for shard in shards {
+        let offset = groups.len() as u32;
+        let shift = |g: u32| if g == NO_GROUP { NO_GROUP } else { g + offset };
+        groups.extend(shard.groups);
+        encoded.extend(shard.encoded.into_iter().map(|mut c| {
+            c.group = shift(c.group);
+            c.own_group = shift(c.own_group);
+            c
+        }));
+        top.extend(shard.top.into_iter().map(|mut c| {
+            c.cluster.own_group = shift(c.cluster.own_group);
+            c
+        }));
+        stats.add(&shard.stats);
+        welded_vertices += shard.welded_vertices;
+        degenerate += shard.degenerate;
+        level = level.max(shard.levels);
+    }
+    let merged = context.merged_mesh(&top);
+    let clusters = context.top_clusters(&merged, &top)?;
+    let mut builder = Builder::new(&merged, settings, clusters, level, groups.len() as u32);
+    progress(&format!("merge: {} clusters from {} shards", top.len(), stats.shards));
+    while builder.step(progress) {}
+    builder.make_roots();
+    stats.add(&builder.stats);
+    stats.root_groups = builder.stats.root_groups;
+    stats.root_clusters = builder.stats.root_clusters;
+    groups.append(&mut builder.groups);
+    let built = std::mem::take(&mut builder.clusters);
+    drop(builder);
+    let header = Header { source_triangles: kept + degenerate, ..header(&merged, settings) };
+    let encode = |c: &DagCluster, i: usize| EncodedCluster::new(c, &header, i).map_err(BakeError::Write);
+    let base = encoded.len();
+    let mut merged_encoded: Vec<EncodedCluster> = built
+        .par_iter()
+        .enumerate()
+        .map(|(i, c)| match top.get(i) {
+            // A shard's top cluster: its own geometry, its group from the merge.
+            Some(t) => encode(&DagCluster { group: c.group, ..t.cluster.clone() }, base + i),
+            None => encode(&to_dag_cluster(&merged, c), base + i),
+        })
+        .collect::<Result<_, _>>()?;
+    encoded.append(&mut merged_encoded);
+    lap(&mut stats, "merge");
+    Ok(ShardedDag { header, groups, clusters: encoded, stats, welded_vertices, degenerate_dropped: degenerate })
+}
+
+fn spill_error(e: std::io::Error) -> BakeError {
+    BakeError::Settings(format!("shard spill files (temporary directory; set TMPDIR to move it): {e}"))
+}
+
+fn bounds(positions: &[[f32; 3]]) -> Option<([f32; 3], [f32; 3])> {
+    let first = *positions.first()?;
+    Some(
+        positions.iter().fold((first, first), |(lo, hi), p| {
+            ([0, 1, 2].map(|k| lo[k].min(p[k])), [0, 1, 2].map(|k| hi[k].max(p[k])))
+        }),
+    )
+}
+
+/// The shard cells: a k-d tree whose leaves are cells.
+struct Cells {
+    /// Inner nodes: (axis, split value, child below, child at or above); a child index with
+    /// the top bit set is cell `index & !LEAF`.
+    nodes: Vec<(usize, f32, u32, u32)>,
+    cells: usize,
+}
+
+const LEAF: u32 = 1 << 31;
+
+impl Cells {
+    fn new(source: &ShardSource, shard_triangles: u64) -> Cells {
+        let n = source.positions.len();
+        let stride = n.div_ceil(CELL_SAMPLE).max(1);
+        let mut sample: Vec<[f32; 3]> = source.positions.iter().step_by(stride).copied().collect();
+        // Vertices (sampled) per cell for about `shard_triangles` triangles.
+        let vertices_per_triangle = n as f64 / source.triangles.max(1) as f64;
+        let per_cell = ((shard_triangles as f64 * vertices_per_triangle / stride as f64) as usize).max(1);
+        let mut cells = Cells { nodes: Vec::new(), cells: 0 };
+        cells.split(&mut sample, per_cell);
+        cells
+    }
+
+    /// Splits `points` until each part has at most `per_cell`; returns the subtree's index.
+    fn split(&mut self, points: &mut [[f32; 3]], per_cell: usize) -> u32 {
+        if points.len() <= per_cell || points.len() < 2 {
+            self.cells += 1;
+            return (self.cells as u32 - 1) | LEAF;
+        }
+        let (lo, hi) = bounds(points).expect("non-empty");
+        let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
+        let mid = points.len() / 2;
+        points.select_nth_unstable_by(mid, |a, b| a[axis].total_cmp(&b[axis]));
+        let at = points[mid][axis];
+        let node = self.nodes.len();
+        self.nodes.push((axis, at, 0, 0));
+        let (below, above) = points.split_at_mut(mid);
+        let below = self.split(below, per_cell);
+        let above = self.split(above, per_cell);
+        self.nodes[node].2 = below;
+        self.nodes[node].3 = above;
+        node as u32
+    }
+
+    fn count(&self) -> usize {
+        self.cells
+    }
+
+    fn cell_of(&self, p: [f32; 3]) -> usize {
+        let mut at = if self.nodes.is_empty() { LEAF } else { 0 };
+        while at & LEAF == 0 {
+            let (axis, split, below, above) = self.nodes[at as usize];
+            at = if p[axis] < split { below } else { above };
+        }
+        (at & !LEAF) as usize
+    }
+}
+
+/// A shard's coarsest cluster, carried into the merge.
+struct TopCluster {
+    /// Its geometry (group not yet known).
+    cluster: DagCluster,
+    own_sphere: Sphere,
+    own_error: f32,
+}
+
+/// What one shard's build leaves.
+struct ShardResult {
+    /// Groups, with shard-local ids.
+    groups: Vec<Group>,
+    /// Finished clusters (with shard-local group ids).
+    encoded: Vec<EncodedCluster>,
+    /// Clusters left for the merge.
+    top: Vec<TopCluster>,
+    stats: BuildStats,
+    levels: u32,
+    triangles: u64,
+    welded_vertices: u64,
+    degenerate: u64,
+}
+
+/// What every shard shares.
+struct ShardContext<'a> {
+    source: &'a ShardSource<'a>,
+    settings: &'a BakeSettings,
+    grid: Grid,
+    uv: UvQuant,
+    keep_normals: bool,
+    keep_uvs: bool,
+    multi_material: bool,
+}
+
+impl ShardContext<'_> {
+    /// Welds `mesh` on the whole mesh's grid, with the whole mesh's attribute flags.
+    fn weld(&self, mesh: &SourceMesh) -> WeldedMesh {
+        let mut welded = weld_on(mesh, self.settings, self.grid, self.uv);
+        welded.multi_material = self.multi_material;
+        welded
+    }
+
+    /// Reads a spill file and builds the shard's lower levels.
+    fn build(&self, spill: &Path) -> Result<ShardResult, BakeError> {
+        let mut bytes = Vec::new();
+        BufReader::new(File::open(spill).map_err(spill_error)?).read_to_end(&mut bytes).map_err(spill_error)?;
+        let words: Vec<u32> = bytes.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        drop(bytes);
+        // Local vertices: distinct corners, in sorted order (deterministic).
+        let corner = |w: &[u32]| Corner { v: w[0], vt: w[1], vn: w[2] };
+        let mut corners: Vec<Corner> =
+            words.chunks_exact(RECORD / 4).flat_map(|r| (0..3).map(move |k| corner(&r[3 * k..3 * k + 3]))).collect();
+        corners.par_sort_unstable();
+        corners.dedup();
+        let s = self.source;
+        let mesh = SourceMesh {
+            positions: corners.iter().map(|c| s.positions[c.v as usize]).collect(),
+            normals: self.keep_normals.then(|| corners.iter().map(|c| attribute(s.normals, c.vn)).collect()),
+            uvs: self.keep_uvs.then(|| corners.iter().map(|c| attribute(s.uvs, c.vt)).collect()),
+            indices: words
+                .chunks_exact(RECORD / 4)
+                .flat_map(|r| (0..3).map(move |k| corner(&r[3 * k..3 * k + 3])))
+                .map(|c| corners.binary_search(&c).expect("corner is present") as u32)
+                .collect(),
+            materials: words.chunks_exact(RECORD / 4).map(|r| r[9]).collect(),
+            degenerate_dropped: 0,
+        };
+        drop((words, corners));
+        let triangles = mesh.triangle_count() as u64;
+        let welded = self.weld(&mesh);
+        drop(mesh);
+
+        let quiet: Progress = &|_| {};
+        let mut builder = Builder::new(&welded, self.settings, level0(&welded, self.settings), 0, 0);
+        loop {
+            let before = builder.pending_triangles() as f64;
+            if builder.pending.len() <= 4 * self.settings.group_size as usize || !builder.step(quiet) {
+                break;
+            }
+            if builder.pending_triangles() as f64 > SHARD_STOP_REDUCTION * before {
+                break;
+            }
+        }
+        let pending = std::mem::take(&mut builder.pending);
+        let header = header(&welded, self.settings);
+        let mut is_top = vec![false; builder.clusters.len()];
+        for &c in &pending {
+            is_top[c] = true;
+        }
+        let encoded: Vec<EncodedCluster> = builder
+            .clusters
+            .par_iter()
+            .enumerate()
+            .filter(|(i, _)| !is_top[*i])
+            .map(|(i, c)| EncodedCluster::new(&to_dag_cluster(&welded, c), &header, i).map_err(BakeError::Write))
+            .collect::<Result<_, _>>()?;
+        let top = pending
+            .iter()
+            .map(|&i| {
+                let c = &builder.clusters[i];
+                TopCluster { cluster: to_dag_cluster(&welded, c), own_sphere: c.own_sphere, own_error: c.own_error }
+            })
+            .collect();
+        Ok(ShardResult {
+            groups: std::mem::take(&mut builder.groups),
+            encoded,
+            top,
+            levels: builder.level,
+            stats: std::mem::take(&mut builder.stats),
+            triangles,
+            welded_vertices: welded.positions.len() as u64,
+            degenerate: welded.degenerate_dropped,
+        })
+    }
+
+    /// The shards' top clusters as one mesh, welded on the shared grid: shard borders meet.
+    fn merged_mesh(&self, top: &[TopCluster]) -> WeldedMesh {
+        let mut mesh = SourceMesh {
+            normals: self.keep_normals.then(Vec::new),
+            uvs: self.keep_uvs.then(Vec::new),
+            ..Default::default()
+        };
+        for t in top {
+            let c = &t.cluster;
+            let base = mesh.positions.len() as u32;
+            mesh.positions.extend(c.positions.iter().map(|&q| self.grid.decode(q)));
+            if let Some(n) = &mut mesh.normals {
+                n.extend_from_slice(&c.normals);
+            }
+            if let Some(u) = &mut mesh.uvs {
+                u.extend_from_slice(&c.uvs);
+            }
+            mesh.indices.extend(c.indices.iter().map(|&i| base + i as u32));
+            if c.materials.is_empty() {
+                // Single-material mesh: every vertex has the same material.
+                mesh.materials.extend(std::iter::repeat_n(0, c.indices.len() / 3));
+            } else {
+                mesh.materials.extend(c.materials.iter().map(|&m| m as u32));
+            }
+        }
+        self.weld(&mesh)
+    }
+
+    /// The top clusters as pending clusters of the merged mesh (same triangle order).
+    /// Fails if welding moved a vertex off its grid point (the grid's f32 arithmetic cannot
+    /// round-trip: a mesh very far from its origin relative to its size).
+    fn top_clusters(&self, merged: &WeldedMesh, top: &[TopCluster]) -> Result<Vec<Cluster>, BakeError> {
+        let mut at = 0;
+        let mut clusters = Vec::with_capacity(top.len());
+        for t in top {
+            let n = t.cluster.indices.len();
+            let indices = merged.indices.get(at..at + n).unwrap_or_default();
+            let exact = indices.len() == n
+                && indices
+                    .iter()
+                    .zip(&t.cluster.indices)
+                    .all(|(&v, &local)| merged.grid_positions[v as usize] == t.cluster.positions[local as usize]);
+            if !exact {
+                return Err(BakeError::Settings(
+                    "merging shards: the position grid does not round-trip in f32 (mesh too far from the origin for its \
+                     size?); raise shard_triangles to bake it whole"
+                        .into(),
+                ));
+            }
+            let indices = indices.to_vec();
+            at += n;
+            clusters.push(Cluster {
+                indices,
+                own_group: t.cluster.own_group,
+                own_sphere: t.own_sphere,
+                own_error: t.own_error,
+                group: NO_GROUP,
+            });
+        }
+        Ok(clusters)
+    }
+}
+
+fn attribute<T: Copy + Default>(values: &[T], index: u32) -> T {
+    if index == NONE {
+        T::default()
+    } else {
+        values.get(index as usize).copied().unwrap_or_default()
+    }
+}
