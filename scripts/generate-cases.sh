@@ -2,12 +2,25 @@
 # Writes the large and nasty test cases into DIR (default /tmp/mres-cases), for benchmarks and
 # for trying the CI job on meshes that are not in the repository:
 #   scripts/generate-cases.sh [DIR] && target/release/bake-all DIR -o DIR/out --no-cache
+# With --huge, writes only the sharding cases: a 5M-triangle terrain (bakes whole or sharded)
+# and a 50M-triangle terrain (3.8 GB of OBJ; the streaming importer and sharding bake it):
+#   scripts/generate-cases.sh --huge [DIR]
 set -euo pipefail
 cd "$(dirname "$0")/.."
+huge=false
+if [ "${1:-}" = "--huge" ]; then
+  huge=true
+  shift
+fi
 dir=${1:-/tmp/mres-cases}
 mkdir -p "$dir"
 cargo build --release --quiet -p mres-baker
 g() { target/release/mres generate "$@"; }
+if $huge; then
+  g terrain 1582 -o "$dir/terrain-5M.obj"
+  g terrain 5000 -o "$dir/terrain-50M.obj"
+  exit 0
+fi
 g sphere 204 -o "$dir/sphere-0.5M.obj"          # closed, with normals
 g sphere 408 -o "$dir/sphere-2M.obj"
 g terrain 1000 -o "$dir/terrain-2M.obj"         # open height field with UVs

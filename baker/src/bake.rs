@@ -2,7 +2,7 @@
 
 use crate::dag::{build_dag, BuildStats};
 use crate::settings::BakeSettings;
-use crate::shard::{build_sharded, ShardSource};
+use crate::shard::{build_sharded, ShardSource, ShardedDag};
 use crate::weld::weld;
 use formats::import::obj_stream::{Corner, ObjVertices, NONE};
 use formats::import::{import_file, ImportLimits, InputKind};
@@ -92,8 +92,11 @@ pub fn bake_file_with_progress(path: &Path, settings: &BakeSettings, progress: P
                 triangles: obj.triangles,
                 for_each_triangle: &for_each,
             };
-            let mut baked = bake_sharded(&source, settings, progress)?;
+            let dag = build_sharded(&source, settings, progress)?;
+            drop(obj); // the vertex arrays are not needed to write
+            let mut baked = write_sharded(dag, settings, progress)?;
             baked.stats.import_seconds = import_seconds;
+            baked.stats.build_seconds = start.elapsed().as_secs_f64() - import_seconds;
             return Ok(baked);
         }
     }
@@ -133,9 +136,14 @@ pub fn bake_mesh_with_progress(
             triangles: mesh.triangle_count() as u64,
             for_each_triangle: &for_each,
         };
-        let mut baked = bake_sharded(&source, settings, progress)?;
-        baked.stats.degenerate_dropped += mesh.degenerate_dropped;
-        baked.stats.source_triangles += mesh.degenerate_dropped;
+        let start = Instant::now();
+        let dag = build_sharded(&source, settings, progress)?;
+        let dropped = mesh.degenerate_dropped;
+        drop(mesh);
+        let mut baked = write_sharded(dag, settings, progress)?;
+        baked.stats.build_seconds = start.elapsed().as_secs_f64();
+        baked.stats.degenerate_dropped += dropped;
+        baked.stats.source_triangles += dropped;
         return Ok(baked);
     }
     let start = Instant::now();
@@ -175,10 +183,9 @@ pub fn bake_mesh_with_progress(
 /// smaller than this times `shard_triangles` cannot need sharding and are imported whole.
 const OBJ_MIN_BYTES_PER_TRIANGLE: u64 = 8;
 
-/// Bakes a mesh in shards (see `shard`).
-fn bake_sharded(source: &ShardSource, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
+/// Writes the result of a sharded build (see `shard`).
+fn write_sharded(dag: ShardedDag, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
     let start = Instant::now();
-    let dag = build_sharded(source, settings, progress)?;
     progress("write");
     let write_start = Instant::now();
     let (groups, clusters) = (dag.groups.len() as u64, dag.clusters.len() as u64);
@@ -194,6 +201,7 @@ fn bake_sharded(source: &ShardSource, settings: &BakeSettings, progress: Progres
         clusters,
         build,
         import_seconds: 0.0,
+        // The write only; callers add the build.
         build_seconds: start.elapsed().as_secs_f64(),
         bytes: bytes.len() as u64,
     };

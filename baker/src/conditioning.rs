@@ -31,6 +31,9 @@ pub struct Conditioning {
     pub edge_age_mean: f64,
     /// Maximum of the same.
     pub edge_age_max: u32,
+    /// Original interior edges by age: entry `a` counts the edges last seen at level `a`. A
+    /// band of edges kept long (e.g. along shard borders) shows as a tail.
+    pub edge_age_histogram: Vec<u64>,
     /// Original open and non-manifold edges: locked in every cut by design, not aged.
     pub locked_original_edges: u64,
 }
@@ -147,6 +150,10 @@ pub(crate) fn conditioning(
     let aged: Vec<i64> = age.into_iter().zip(&edges.original).filter(|(_, &n)| n == 2).map(|(a, _)| a).collect();
     out.edge_age_mean = aged.iter().sum::<i64>() as f64 / aged.len().max(1) as f64;
     out.edge_age_max = aged.iter().copied().max().unwrap_or(0) as u32;
+    out.edge_age_histogram = vec![0; out.edge_age_max as usize + 1];
+    for &a in &aged {
+        out.edge_age_histogram[a as usize] += 1;
+    }
     if out.edge_age_mean > thresholds.max_edge_age_mean {
         violations.push(format!(
             "mean edge age {:.2} above {} (edges stay locked too long)",

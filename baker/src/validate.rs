@@ -68,6 +68,8 @@ impl Default for Thresholds {
 pub struct ValidateOptions {
     /// Number of random view-dependent cuts (random cameras and pixel thresholds).
     pub random_cuts: usize,
+    /// Most uniform cuts (0: one per distinct group error, all of them).
+    pub uniform_cuts: usize,
     /// Seed of the camera generator.
     pub seed: u64,
     /// Most violations listed in the report (all are counted).
@@ -78,7 +80,13 @@ pub struct ValidateOptions {
 
 impl Default for ValidateOptions {
     fn default() -> Self {
-        ValidateOptions { random_cuts: 1000, seed: 1, max_listed: 20, thresholds: Thresholds::default() }
+        ValidateOptions {
+            random_cuts: 1000,
+            uniform_cuts: 0,
+            seed: 1,
+            max_listed: 20,
+            thresholds: Thresholds::default(),
+        }
     }
 }
 
@@ -271,6 +279,12 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
     thresholds.push(0.0);
     thresholds.sort_by(f32::total_cmp);
     thresholds.dedup();
+    if options.uniform_cuts >= 2 && thresholds.len() > options.uniform_cuts {
+        let last = thresholds.len() - 1;
+        let n = options.uniform_cuts - 1;
+        thresholds = (0..=n).map(|i| thresholds[i * last / n]).collect();
+        thresholds.dedup();
+    }
     let uniform: Vec<(String, Vec<u32>)> = thresholds
         .iter()
         .map(|&t| (format!("uniform cut at error {t}"), select::uniform_cut(groups, clusters, t)))

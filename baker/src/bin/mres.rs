@@ -28,6 +28,11 @@ enum Command {
         /// Random view-dependent cuts to check.
         #[arg(long, default_value_t = 1000)]
         random_cuts: usize,
+        /// Most uniform cuts to check: every distinct group error by default (0); with N,
+        /// N thresholds spread evenly over the sorted errors, the finest and coarsest included
+        /// (for files of tens of millions of triangles).
+        #[arg(long, default_value_t = 0)]
+        uniform_cuts: usize,
         /// Seed of the random cameras.
         #[arg(long, default_value_t = 1)]
         seed: u64,
@@ -150,9 +155,9 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
-        Command::Validate { file, random_cuts, seed, json } => {
+        Command::Validate { file, random_cuts, uniform_cuts, seed, json } => {
             let f = open(&file)?;
-            let report = validate(&f, &ValidateOptions { random_cuts, seed, ..Default::default() })
+            let report = validate(&f, &ValidateOptions { random_cuts, uniform_cuts, seed, ..Default::default() })
                 .with_context(|| format!("{}", file.display()))?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
@@ -193,6 +198,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     "edge age mean {:.2} max {} ({} locked original edges); same-boundary clusters {}; group sizes {:?}",
                     c.edge_age_mean, c.edge_age_max, c.locked_original_edges, c.same_boundary_clusters, c.group_size_histogram
                 );
+                println!("edges by age (levels survived): {:?}", c.edge_age_histogram);
                 println!(
                     "error honesty: worst {:.2} p99 {:.2} (measured distance / stored error, {} cuts, {} points); worst at {}",
                     report.honesty.worst_ratio, report.honesty.p99_ratio, report.honesty.cuts, report.honesty.samples, report.honesty.worst
@@ -326,6 +332,13 @@ fn inspect(f: &MresFile, json: bool) -> Result<()> {
         "level0_clusters": level0, "pages": f.pages.len(), "file_bytes": f.file_size(), "raw_page_bytes": raw,
         "stored_triangles": f.clusters.iter().map(|c| c.triangle_count as u64).sum::<u64>(),
         "root_groups": f.groups.iter().filter(|g| g.error.is_infinite()).count(),
+        // Triangles drawn by uniform cuts at fixed fractions of the largest extent: comparable
+        // between two bakes of one mesh (e.g. sharded and whole).
+        "cut_triangles_at_extent_fraction": CUT_THRESHOLDS.iter().map(|&t| {
+            let extent = h.grid.step * ((1u64 << h.position_bits) - 1) as f32;
+            let cut = select::uniform_cut(&f.groups, &f.clusters, t * extent);
+            (t, cut.iter().map(|&c| f.clusters[c as usize].triangle_count as u64).sum::<u64>())
+        }).collect::<Vec<_>>(),
     });
     if json {
         println!("{}", serde_json::to_string_pretty(&value)?);

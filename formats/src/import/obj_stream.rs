@@ -135,6 +135,10 @@ impl ObjVertices {
         if !out.all_normals {
             out.normals = Vec::new();
         }
+        // The arrays grew by doubling: give the slack back (they stay for the whole bake).
+        out.positions.shrink_to_fit();
+        out.uvs.shrink_to_fit();
+        out.normals.shrink_to_fit();
         Ok(out)
     }
 
