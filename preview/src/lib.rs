@@ -6,15 +6,19 @@
 //! - [`vk`] holds every `unsafe` Vulkan call: the context, the owners of each object, and the
 //!   [`vk::Renderer`] that runs the selection compute pass and the fallback draw
 //!   (compute-expanded index buffer + indirect indexed draw).
+//! - [`viewer`] is the windowed viewer (winit): a [`fly`] camera, keys for τ and the modes,
+//!   frames drawn by the same renderer and blitted into a swapchain.
 //! - [`verify`] proves a file: GPU selection equals the CPU reference for many cameras, and the
 //!   drawn cut of a closed mesh shows no back face from outside.
 #![deny(missing_docs)]
 
 pub mod bench;
 pub mod camera;
+pub mod fly;
 pub mod gpu_types;
 pub mod image;
 pub mod lod_chain;
 pub mod scene;
 pub mod verify;
+pub mod viewer;
 pub mod vk;

@@ -1,4 +1,5 @@
-//! `preview FILE.mres`: headless render, verify and screenshot modes of the mres preview.
+//! `preview FILE.mres`: the windowed viewer, and the headless render, verify, screenshot and
+//! benchmark modes of the mres preview.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -14,13 +15,15 @@ use preview::verify::{verify, VerifyOptions};
 use preview::vk::{ContextOptions, Device, DrawPath, Renderer, RendererOptions};
 use serde_json::json;
 
-/// Render a .mres file through the GPU selection path: verify it, or write a screenshot.
+/// Render a .mres file through the GPU selection path: view it in a window, verify it, write a
+/// screenshot, or benchmark it.
 #[derive(Parser, Debug)]
-#[command(version)]
+#[command(version, after_help = WINDOW_KEYS)]
 struct Args {
     /// The .mres file.
     file: PathBuf,
-    /// Render offscreen (no window). Required: the windowed viewer is not implemented.
+    /// Render offscreen (no window): needed for --verify and --bench, and where no display is.
+    /// Without it, a window opens (X11 DISPLAY or WAYLAND_DISPLAY must be set).
     #[arg(long)]
     headless: bool,
     /// Check GPU selection against the CPU reference and run the crack test; exit 1 on failure.
@@ -30,19 +33,22 @@ struct Args {
     /// error message fails the run.
     #[arg(long)]
     validate: bool,
-    /// Write a screenshot PNG.
+    /// Write a screenshot PNG. In the window: of the last frame shown (read back from the
+    /// presented swapchain image) when it closes, and on P.
     #[arg(long, value_name = "PNG")]
     out: Option<PathBuf>,
-    /// Selection threshold of the screenshot, pixels.
+    /// Selection threshold of the screenshot (initial value in the window), pixels.
     #[arg(long, default_value_t = 1.0)]
     tau: f32,
-    /// Eye position of the screenshot, `x,y,z` (object space); it looks at the model's centre.
+    /// Eye position of the screenshot (initial one in the window), `x,y,z` (object space); it
+    /// looks at the model's centre.
     /// Default: a three-quarter view framing the root bounding sphere.
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     camera: Option<String>,
-    /// Image size, `WxH` (verify renders use it too).
-    #[arg(long, default_value = "512x512")]
-    size: String,
+    /// Image size, `WxH` (verify renders use it too). Default: 512x512 headless, 1920x1080 for
+    /// --bench, 1280x720 for the window.
+    #[arg(long)]
+    size: Option<String>,
     /// Cameras of the selection check (each with 4 thresholds: 0.25, 1, 4, 16 px).
     #[arg(long, default_value_t = 200)]
     cameras: usize,
@@ -75,16 +81,17 @@ struct Args {
     /// Benchmark grid side (1..=100): N×N instances.
     #[arg(long, default_value_t = 10)]
     grid: u32,
-    /// Benchmark frames per method.
-    #[arg(long, default_value_t = 60)]
-    frames: u32,
+    /// Benchmark frames per method (default 60); in the window, quit after this many frames
+    /// (default: run until Esc or closed), e.g. for a test under Xvfb.
+    #[arg(long)]
+    frames: Option<u32>,
     /// Benchmark frames of the full-resolution method when it draws over 10^9 triangles.
     #[arg(long, default_value_t = 5)]
     full_frames: u32,
     /// Write the benchmark report as JSON.
     #[arg(long, value_name = "JSON")]
     json: Option<PathBuf>,
-    /// What the screenshot shows on front faces.
+    /// What the screenshot shows on front faces (initial mode in the window: keys 1-5).
     #[arg(long, value_enum, default_value_t = ModeArg::Shaded)]
     mode: ModeArg,
 }
@@ -141,9 +148,61 @@ fn parse_vec3(s: &str) -> Result<[f32; 3]> {
     }
 }
 
+const WINDOW_KEYS: &str = "Window keys: hold the right mouse button (or press Tab to toggle) to look \
+around; W/A/S/D fly, E or Space up, Q or Ctrl down, Shift 5x faster (speed scales with the model's \
+bounds); + and - or the mouse wheel scale tau; 1-5: shaded, cluster, group, level, error; R resets \
+the camera; P writes a screenshot (--out, else preview-NNNNN.png); Esc quits. The title shows \
+clusters and triangles drawn, GPU ms per pass and the frame rate.";
+
+fn path_choice(arg: PathArg) -> DrawPath {
+    match arg {
+        PathArg::Auto => DrawPath::Auto,
+        PathArg::Mesh => DrawPath::Mesh,
+        PathArg::Fallback => DrawPath::Fallback,
+    }
+}
+
+/// `preview FILE.mres` without `--headless`: the window.
+fn run_window(args: &Args) -> Result<ExitCode> {
+    if args.verify || args.bench {
+        bail!("--verify and --bench render offscreen: add --headless");
+    }
+    if !preview::viewer::display_available() {
+        bail!("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): add --headless to render offscreen (with --out, --verify or --bench)");
+    }
+    let size = parse_size(args.size.as_deref().unwrap_or("1280x720"))?;
+    let file = MresFile::open(&args.file).with_context(|| format!("cannot read {}", args.file.display()))?;
+    let scene = SceneData::from_file(&file).with_context(|| format!("{}", args.file.display()))?;
+    let options = preview::viewer::ViewerOptions {
+        label: args.file.file_name().map_or_else(|| args.file.display().to_string(), |n| n.to_string_lossy().into_owned()),
+        size,
+        tau: args.tau,
+        mode: args.mode.gpu(),
+        eye: args.camera.as_deref().map(parse_vec3).transpose()?,
+        frames: args.frames.map(|n| n.max(1)),
+        screenshot: args.out.clone(),
+        renderer: RendererOptions { naive_arithmetic: args.naive_arithmetic, path: path_choice(args.path), ..Default::default() },
+        context: ContextOptions {
+            validation: args.validate,
+            device_name: args.device.clone(),
+            allow_mesh_shaders: args.path != PathArg::Fallback,
+            display: None,
+        },
+    };
+    let report = preview::viewer::run(&scene, file.clusters.len() as u32, options)?;
+    let mut ok = true;
+    if args.validate {
+        let counts = &report.counts;
+        println!("validation messages: {} errors, {} warnings", counts.errors(), counts.warnings());
+        ok = counts.errors() == 0 && counts.warnings() == 0;
+        println!("{}", if ok { "PASS" } else { "FAIL" });
+    }
+    Ok(if ok { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
 fn run(args: Args) -> Result<ExitCode> {
     if !args.headless {
-        bail!("the windowed viewer is not implemented: use --headless (with --verify and/or --out)");
+        return run_window(&args);
     }
     if !args.verify && args.out.is_none() && !args.bench {
         bail!("nothing to do: give --verify, --out PNG and/or --bench");
@@ -151,7 +210,7 @@ fn run(args: Args) -> Result<ExitCode> {
     if !(1..=100).contains(&args.grid) {
         bail!("--grid {}: must be 1..=100", args.grid);
     }
-    let size = if args.bench && args.size == "512x512" { "1920x1080" } else { args.size.as_str() };
+    let size = args.size.as_deref().unwrap_or(if args.bench { "1920x1080" } else { "512x512" });
     let (width, height) = parse_size(size)?;
     let file = MresFile::open(&args.file).with_context(|| format!("cannot read {}", args.file.display()))?;
     let scene = SceneData::from_file(&file).with_context(|| format!("{}", args.file.display()))?;
@@ -159,17 +218,11 @@ fn run(args: Args) -> Result<ExitCode> {
         validation: args.validate,
         device_name: args.device.clone(),
         allow_mesh_shaders: args.path != PathArg::Fallback,
+        display: None,
     })?;
     let info = device.info.clone();
     let counts = device.counts.clone();
-    println!(
-        "device: {} ({}; Vulkan {}; subgroup {}; mesh shaders {})",
-        info.name,
-        info.driver,
-        info.api_version,
-        info.subgroup_size,
-        if info.mesh_shader_available { "available" } else { "not available" }
-    );
+    println!("device: {}", info.summary());
     println!("validation: {}", if args.validate { "on" } else { "off" });
     println!(
         "file: {} clusters, {} groups, {} pages ({} bytes decompressed), {} level-0 triangles",
@@ -179,11 +232,7 @@ fn run(args: Args) -> Result<ExitCode> {
         scene.pages.len(),
         scene.level0_triangles
     );
-    let path = match args.path {
-        PathArg::Auto => DrawPath::Auto,
-        PathArg::Mesh => DrawPath::Mesh,
-        PathArg::Fallback => DrawPath::Fallback,
-    };
+    let path = path_choice(args.path);
     if args.bench {
         let instances = preview::bench::grid_instances(&scene, args.grid);
         let started = std::time::Instant::now();
@@ -200,7 +249,7 @@ fn run(args: Args) -> Result<ExitCode> {
         let mut chain_renderer = preview::vk::ChainRenderer::new(&device, &chain, &instances)?;
         let options = preview::bench::BenchOptions {
             grid: args.grid,
-            frames: args.frames.max(1),
+            frames: args.frames.unwrap_or(60).max(1),
             full_frames_when_huge: args.full_frames.max(1),
             width,
             height,

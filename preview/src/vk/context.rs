@@ -36,6 +36,9 @@ pub struct ContextOptions {
     pub device_name: Option<String>,
     /// Use `VK_EXT_mesh_shader` when the device has it.
     pub allow_mesh_shaders: bool,
+    /// The display a window will be shown on: enables its surface extensions on the instance
+    /// and `VK_KHR_swapchain` on the device (devices without it are skipped). `None`: headless.
+    pub display: Option<raw_window_handle::RawDisplayHandle>,
 }
 
 /// Warnings and errors reported by the validation layer, counted by the debug messenger.
@@ -151,10 +154,26 @@ pub struct DeviceInfo {
     pub mesh_shader_available: bool,
     /// Whether the device was created with `VK_EXT_mesh_shader` enabled.
     pub mesh_shader_enabled: bool,
+    /// Whether the device was created with `VK_KHR_swapchain` (for a window) enabled.
+    pub swapchain_enabled: bool,
     /// `maxTaskWorkGroupCount[0]` when mesh shaders are available.
     pub max_task_groups_x: u32,
     /// `maxTaskWorkGroupTotalCount` when mesh shaders are available.
     pub max_task_groups_total: u32,
+}
+
+impl DeviceInfo {
+    /// One line for logs: name, driver, Vulkan version, subgroup size, mesh shaders.
+    pub fn summary(&self) -> String {
+        format!(
+            "{} ({}; Vulkan {}; subgroup {}; mesh shaders {})",
+            self.name,
+            self.driver,
+            self.api_version,
+            self.subgroup_size,
+            if self.mesh_shader_available { "available" } else { "not available" }
+        )
+    }
 }
 
 /// Owner of the `VkDevice` (and its one queue).
@@ -212,7 +231,12 @@ impl Device {
             .application_name(&app_name)
             .api_version(vk::API_VERSION_1_3);
         let layer_ptrs = if validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
-        let ext_ptrs = if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        let mut ext_ptrs = if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        if let Some(display) = options.display {
+            ext_ptrs.extend_from_slice(
+                ash_window::enumerate_required_extensions(display).context("this display has no Vulkan surface extension")?,
+            );
+        }
         let enabled_validation = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
         let mut validation_features =
             vk::ValidationFeaturesEXT::default().enabled_validation_features(&enabled_validation);
@@ -267,6 +291,10 @@ impl Device {
         if mesh_enabled {
             extensions.push(ash::ext::mesh_shader::NAME.as_ptr());
         }
+        let swapchain_enabled = options.display.is_some();
+        if swapchain_enabled {
+            extensions.push(ash::khr::swapchain::NAME.as_ptr());
+        }
         let mut features2 = vk::PhysicalDeviceFeatures2::default().features(features10);
         let mut create = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queues)
@@ -281,7 +309,7 @@ impl Device {
         // SAFETY: family `queue_family` was requested with one queue.
         let queue = unsafe { raw.get_device_queue(queue_family, 0) };
         let mesh = mesh_enabled.then(|| ash::ext::mesh_shader::Device::new(&instance.raw, &raw));
-        let info = DeviceInfo { mesh_shader_enabled: mesh_enabled, ..info };
+        let info = DeviceInfo { mesh_shader_enabled: mesh_enabled, swapchain_enabled, ..info };
         Ok(Arc::new(Device {
             raw,
             physical,
@@ -329,6 +357,7 @@ fn pick_physical_device(instance: &Instance, options: &ContextOptions) -> Result
             let mut mesh_props = vk::PhysicalDeviceMeshShaderPropertiesEXT::default();
             let exts = instance.raw.enumerate_device_extension_properties(pd)?;
             let has_mesh_ext = exts.iter().any(|e| e.extension_name_as_c_str().ok() == Some(ash::ext::mesh_shader::NAME));
+            let has_swapchain = exts.iter().any(|e| e.extension_name_as_c_str().ok() == Some(ash::khr::swapchain::NAME));
             let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver).push_next(&mut subgroup);
             if has_mesh_ext {
                 props2 = props2.push_next(&mut mesh_props);
@@ -356,6 +385,7 @@ fn pick_physical_device(instance: &Instance, options: &ContextOptions) -> Result
                 (f13.dynamic_rendering == 0, "dynamicRendering"),
                 (f13.synchronization2 == 0, "synchronization2"),
                 (f13.maintenance4 == 0, "maintenance4"),
+                (options.display.is_some() && !has_swapchain, "VK_KHR_swapchain"),
             ]
             .iter()
             .filter(|(bad, _)| *bad)
@@ -391,6 +421,7 @@ fn pick_physical_device(instance: &Instance, options: &ContextOptions) -> Result
                 subgroup_size: subgroup.subgroup_size,
                 mesh_shader_available: mesh_ok,
                 mesh_shader_enabled: false,
+                swapchain_enabled: false,
                 max_task_groups_x: if mesh_ok { mesh_props.max_task_work_group_count[0] } else { 0 },
                 max_task_groups_total: if mesh_ok { mesh_props.max_task_work_group_total_count } else { 0 },
             };

@@ -7,7 +7,9 @@ mod chain;
 mod context;
 mod renderer;
 mod resources;
+mod swapchain;
 
 pub use context::{validation_available, ContextOptions, Device, DeviceInfo, MessageCounts};
 pub use renderer::{DrawPath, Frame, PassTimes, Renderer, RendererOptions, Selection, CLEAR_RGBA, MAX_VISIBLE};
 pub use chain::{ChainFrame, ChainRenderer};
+pub use swapchain::{AcquiredImage, Surface, Swapchain};

@@ -9,6 +9,7 @@ use ash::vk;
 use bytemuck::{bytes_of, cast_slice};
 
 use super::context::Device;
+use super::swapchain::{AcquiredImage, Swapchain};
 use super::resources::{
     subresource_range, Buffer, CommandPool, DescriptorPool, DescriptorSetLayout, Fence, Image, Location, Pipeline,
     PipelineLayout, QueryPool, ShaderModule,
@@ -80,6 +81,14 @@ pub struct Frame {
     pub times: Option<PassTimes>,
 }
 
+/// Where a frame for the window goes (see [`Renderer::render_to_swapchain`]).
+struct PresentTarget {
+    image: AcquiredImage,
+    extent: vk::Extent2D,
+    format: vk::Format,
+    screenshot: bool,
+}
+
 struct RenderTarget {
     color: Image,
     depth: Image,
@@ -144,6 +153,8 @@ pub struct Renderer {
     readback_visible: Buffer,
     readback_projected: Buffer,
     target: Option<RenderTarget>,
+    /// Host copy of a presented swapchain image (screenshots from the window).
+    present_readback: Option<Buffer>,
     _set_layout: DescriptorSetLayout,
     pipeline_layout: PipelineLayout,
     _descriptor_pool: DescriptorPool,
@@ -382,6 +393,7 @@ impl Renderer {
             readback_visible,
             readback_projected,
             target: None,
+            present_readback: None,
             _set_layout: set_layout,
             pipeline_layout,
             _descriptor_pool: descriptor_pool,
@@ -472,28 +484,60 @@ impl Renderer {
     /// Selects, expands and draws the clusters for `view` into a `width` × `height` image and
     /// reads it back. Front faces are shaded, back faces pure red (the crack test's flag).
     pub fn render(&mut self, view: &GpuView, width: u32, height: u32) -> Result<Frame> {
-        self.render_frame(view, width, height, false)
+        self.render_frame(view, width, height, false, None)
+    }
+
+    /// Renders `view` exactly as [`Renderer::render_without_readback`] does, at the swapchain's
+    /// size, then blits the image into `image` (acquired from `swapchain`) and leaves it ready
+    /// to present: the submission waits on [`AcquiredImage::acquired`] and signals
+    /// [`AcquiredImage::rendered`]. With `screenshot`, [`Frame::rgba`] holds the swapchain
+    /// image as presented (converted to RGBA), which needs [`Swapchain::readable`].
+    pub fn render_to_swapchain(&mut self, view: &GpuView, swapchain: &Swapchain, image: &AcquiredImage, screenshot: bool) -> Result<Frame> {
+        if screenshot && !swapchain.readable {
+            bail!("this surface's images cannot be read back (no TRANSFER_SRC usage)");
+        }
+        if screenshot && !matches!(swapchain.format, vk::Format::B8G8R8A8_UNORM | vk::Format::R8G8B8A8_UNORM) {
+            bail!("screenshots need an 8-bit UNORM swapchain, not {:?}", swapchain.format);
+        }
+        let present = PresentTarget { image: *image, extent: swapchain.extent, format: swapchain.format, screenshot };
+        self.no_readback = true;
+        let frame = self.render_frame(view, swapchain.extent.width, swapchain.extent.height, false, Some(&present));
+        self.no_readback = false;
+        frame
     }
 
     /// [`Renderer::render`] without reading the image back (counts and times only).
     pub fn render_without_readback(&mut self, view: &GpuView, width: u32, height: u32) -> Result<Frame> {
         self.no_readback = true;
-        let frame = self.render_frame(view, width, height, false);
+        let frame = self.render_frame(view, width, height, false, None);
         self.no_readback = false;
         frame
     }
 
     /// [`Renderer::render`], also reading back the depth buffer.
     pub fn render_with_depth(&mut self, view: &GpuView, width: u32, height: u32) -> Result<Frame> {
-        self.render_frame(view, width, height, true)
+        self.render_frame(view, width, height, true, None)
     }
 
-    fn render_frame(&mut self, view: &GpuView, width: u32, height: u32, want_depth: bool) -> Result<Frame> {
+    fn render_frame(&mut self, view: &GpuView, width: u32, height: u32, want_depth: bool, present: Option<&PresentTarget>) -> Result<Frame> {
         self.prepare_view(view)?;
         self.ensure_target(width, height)?;
+        if let Some(p) = present {
+            self.ensure_present_readback(p)?;
+        }
         let target = self.target.as_ref().context("render target")?;
         let extent = target.color.extent;
-        self.submit(|dev, cmd| {
+        // Presentation: wait for the image to be acquired before the blit writes it (the
+        // barrier below chains to this stage), signal presentation when everything is done.
+        let waits: Vec<vk::SemaphoreSubmitInfo> = present
+            .map(|p| vk::SemaphoreSubmitInfo::default().semaphore(p.image.acquired).stage_mask(vk::PipelineStageFlags2::BLIT))
+            .into_iter()
+            .collect();
+        let signals: Vec<vk::SemaphoreSubmitInfo> = present
+            .map(|p| vk::SemaphoreSubmitInfo::default().semaphore(p.image.rendered).stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS))
+            .into_iter()
+            .collect();
+        self.submit_with(&waits, &signals, |dev, cmd| {
             // SAFETY: recording into `cmd` with resources owned by `self`; layouts are
             // transitioned from UNDEFINED each frame (contents are cleared anyway).
             unsafe {
@@ -586,7 +630,7 @@ impl Renderer {
                 let to_copy = [vk::ImageMemoryBarrier2::default()
                     .src_stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)
                     .src_access_mask(vk::AccessFlags2::COLOR_ATTACHMENT_WRITE)
-                    .dst_stage_mask(vk::PipelineStageFlags2::COPY)
+                    .dst_stage_mask(vk::PipelineStageFlags2::COPY | vk::PipelineStageFlags2::BLIT)
                     .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
                     .old_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
                     .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
@@ -603,6 +647,9 @@ impl Renderer {
                 }];
                 if !self.no_readback {
                     dev.cmd_copy_image_to_buffer(cmd, target.color.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, target.readback.raw, &region);
+                }
+                if let Some(p) = present {
+                    self.record_present(dev, cmd, &target.color, p, &region);
                 }
                 if want_depth {
                     let to_copy = [vk::ImageMemoryBarrier2::default()
@@ -632,7 +679,17 @@ impl Renderer {
         })?;
         let counters = self.read_counters()?;
         let pixels = extent.width as usize * extent.height as usize;
-        let rgba = if self.no_readback { Vec::new() } else { target.readback.read(pixels * 4)? };
+        let rgba = match (present, &self.present_readback) {
+            (Some(p), Some(buffer)) if p.screenshot => {
+                let mut bytes = buffer.read(pixels * 4)?;
+                if p.format == vk::Format::B8G8R8A8_UNORM {
+                    bytes.chunks_exact_mut(4).for_each(|px| px.swap(0, 2));
+                }
+                bytes
+            }
+            _ if self.no_readback => Vec::new(),
+            _ => target.readback.read(pixels * 4)?,
+        };
         let depth = if want_depth { Some(cast_slice::<u8, f32>(&target.depth_readback.read(pixels * 4)?).to_vec()) } else { None };
         let times = self.read_times()?;
         let clusters = counters.visible_count.min(self.visible_capacity);
@@ -695,6 +752,80 @@ impl Renderer {
         Ok(())
     }
 
+    fn ensure_present_readback(&mut self, present: &PresentTarget) -> Result<()> {
+        let bytes = present.extent.width as u64 * present.extent.height as u64 * 4;
+        if present.screenshot && self.present_readback.as_ref().is_none_or(|b| b.size < bytes) {
+            self.present_readback = None;
+            self.present_readback = Some(Buffer::new(&self.device, bytes, vk::BufferUsageFlags::TRANSFER_DST, Location::Readback)?);
+        }
+        Ok(())
+    }
+
+    /// Records the blit of the rendered colour image (in TRANSFER_SRC_OPTIMAL) into the
+    /// acquired swapchain image, an optional copy of that image to the host, and its transition
+    /// to PRESENT_SRC_KHR.
+    ///
+    /// # Safety
+    /// `cmd` must be recording, on `dev`; `color` must be this renderer's colour target, of
+    /// the swapchain's extent, after the barrier that makes it a transfer source.
+    unsafe fn record_present(&self, dev: &ash::Device, cmd: vk::CommandBuffer, color: &Image, present: &PresentTarget, region: &[vk::BufferImageCopy; 1]) {
+        let range = subresource_range(vk::ImageAspectFlags::COLOR);
+        // The submission waits on the acquire semaphore at BLIT: this barrier chains to it.
+        let to_dst = [vk::ImageMemoryBarrier2::default()
+            .src_stage_mask(vk::PipelineStageFlags2::BLIT)
+            .src_access_mask(vk::AccessFlags2::NONE)
+            .dst_stage_mask(vk::PipelineStageFlags2::BLIT)
+            .dst_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+            .old_layout(vk::ImageLayout::UNDEFINED)
+            .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+            .image(present.image.image)
+            .subresource_range(range)];
+        let layers = vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::COLOR, mip_level: 0, base_array_layer: 0, layer_count: 1 };
+        let corner = vk::Offset3D { x: color.extent.width as i32, y: color.extent.height as i32, z: 1 };
+        let blit = [vk::ImageBlit {
+            src_subresource: layers,
+            src_offsets: [vk::Offset3D::default(), corner],
+            dst_subresource: layers,
+            dst_offsets: [vk::Offset3D::default(), corner],
+        }];
+        // SAFETY: per this function's contract; the swapchain image was acquired for this frame.
+        unsafe {
+            dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_dst));
+            dev.cmd_blit_image(cmd, color.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, present.image.image,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL, &blit, vk::Filter::NEAREST);
+            let mut layout = vk::ImageLayout::TRANSFER_DST_OPTIMAL;
+            let (mut stage, mut access) = (vk::PipelineStageFlags2::BLIT, vk::AccessFlags2::TRANSFER_WRITE);
+            if let (true, Some(readback)) = (present.screenshot, &self.present_readback) {
+                let to_src = [vk::ImageMemoryBarrier2::default()
+                    .src_stage_mask(stage)
+                    .src_access_mask(access)
+                    .dst_stage_mask(vk::PipelineStageFlags2::COPY)
+                    .dst_access_mask(vk::AccessFlags2::TRANSFER_READ)
+                    .old_layout(layout)
+                    .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
+                    .image(present.image.image)
+                    .subresource_range(range)];
+                dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_src));
+                dev.cmd_copy_image_to_buffer(cmd, present.image.image, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, readback.raw, region);
+                barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
+                    vk::PipelineStageFlags2::HOST, vk::AccessFlags2::HOST_READ);
+                layout = vk::ImageLayout::TRANSFER_SRC_OPTIMAL;
+                (stage, access) = (vk::PipelineStageFlags2::COPY, vk::AccessFlags2::NONE);
+            }
+            // Presentation needs no access mask: the signal semaphore makes the writes visible.
+            let to_present = [vk::ImageMemoryBarrier2::default()
+                .src_stage_mask(stage)
+                .src_access_mask(access)
+                .dst_stage_mask(vk::PipelineStageFlags2::NONE)
+                .dst_access_mask(vk::AccessFlags2::NONE)
+                .old_layout(layout)
+                .new_layout(vk::ImageLayout::PRESENT_SRC_KHR)
+                .image(present.image.image)
+                .subresource_range(range)];
+            dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_present));
+        }
+    }
+
     /// Records the counter reset, instance culling and the (indirect) selection dispatch.
     ///
     /// # Safety
@@ -723,6 +854,16 @@ impl Renderer {
 
     /// Records `record` into the command buffer, submits it and waits for it to finish.
     fn submit(&self, record: impl FnOnce(&ash::Device, vk::CommandBuffer)) -> Result<()> {
+        self.submit_with(&[], &[], record)
+    }
+
+    /// [`Renderer::submit`], waiting on and signalling the given semaphores.
+    fn submit_with(
+        &self,
+        waits: &[vk::SemaphoreSubmitInfo],
+        signals: &[vk::SemaphoreSubmitInfo],
+        record: impl FnOnce(&ash::Device, vk::CommandBuffer),
+    ) -> Result<()> {
         let dev = &self.device.raw;
         // SAFETY: the command buffer is not in use (every submission is waited for before
         // this returns); the fence is unsignalled (reset after each wait).
@@ -732,7 +873,10 @@ impl Renderer {
             record(dev, self.cmd);
             dev.end_command_buffer(self.cmd)?;
             let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cmd)];
-            let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cmds)];
+            let submit = [vk::SubmitInfo2::default()
+                .wait_semaphore_infos(waits)
+                .command_buffer_infos(&cmds)
+                .signal_semaphore_infos(signals)];
             dev.queue_submit2(self.device.queue, &submit, self.fence.raw).context("vkQueueSubmit2")?;
             dev.wait_for_fences(&[self.fence.raw], true, u64::MAX).context("vkWaitForFences")?;
             dev.reset_fences(&[self.fence.raw])?;
@@ -771,8 +915,8 @@ fn image_barrier<'a>(
     layout: vk::ImageLayout,
 ) -> vk::ImageMemoryBarrier2<'a> {
     vk::ImageMemoryBarrier2::default()
-        // The previous frame's copy (or attachment use) finished before this submission.
-        .src_stage_mask(stage | vk::PipelineStageFlags2::COPY)
+        // The previous frame's copy or blit (or attachment use) finished before this submission.
+        .src_stage_mask(stage | vk::PipelineStageFlags2::COPY | vk::PipelineStageFlags2::BLIT)
         .src_access_mask(vk::AccessFlags2::NONE)
         .dst_stage_mask(stage)
         .dst_access_mask(access)

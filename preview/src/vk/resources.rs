@@ -238,6 +238,20 @@ owner!(
 owner!(
     /// Owner of a `VkQueryPool`.
     QueryPool, vk::QueryPool, destroy_query_pool);
+owner!(
+    /// Owner of a binary `VkSemaphore`.
+    Semaphore, vk::Semaphore, destroy_semaphore);
+
+impl Semaphore {
+    /// Creates an unsignalled binary semaphore.
+    pub fn new(device: &Arc<Device>) -> Result<Semaphore> {
+        // SAFETY: default create info; the handle goes straight into its owner.
+        unsafe {
+            let raw = device.raw.create_semaphore(&vk::SemaphoreCreateInfo::default(), None).context("vkCreateSemaphore")?;
+            Ok(Semaphore::from_raw(device, raw))
+        }
+    }
+}
 
 impl ShaderModule {
     /// Creates a shader module from SPIR-V bytes (any alignment).
