@@ -95,7 +95,7 @@ pub fn build_sharded(
     let keep_normals = settings.keep_normals && !source.normals.is_empty();
     let uv = if keep_uvs { uv_quant(source.uvs) } else { uv_quant(&[]) };
     let cells = Cells::new(source, settings.shard_triangles);
-    progress(&format!("shard: {} cells", cells.count()));
+    progress(&format!("shard: {} triangles into {} cells", source.triangles, cells.count()));
 
     // Spill every triangle to its cell's file.
     let dir = tempfile::Builder::new().prefix("mres-shards-").tempdir().map_err(spill_error)?;
@@ -140,12 +140,12 @@ pub fn build_sharded(
     }
     lap(&mut stats, "spill");
 
-    // Build the shards.
+    // Stage 1: build the shards from their spill files.
     let context = ShardContext { source, settings, grid, uv, keep_normals, keep_uvs, multi_material };
-    let shards: Vec<ShardResult> = (0..cells.count())
+    let shards: Vec<CellResult> = (0..cells.count())
         .into_par_iter()
         .map(|s| {
-            let result = context.build(&dir.path().join(format!("{s}.bin")));
+            let result = context.build_shard(&dir.path().join(format!("{s}.bin")));
             if let Ok(r) = &result {
                 progress(&format!(
                     "shard {}/{}: {} triangles, {} levels, {} top clusters",
@@ -160,58 +160,48 @@ pub fn build_sharded(
         })
         .collect::<Result<_, _>>()?;
     drop(dir);
+    stats.shards = shards.len() as u64;
+    let mut dag = Collected::default();
+    let mut top = dag.collect(shards, &mut stats);
     lap(&mut stats, "shards");
 
-    // Merge: shard groups and clusters under global ids, then the levels above the shards.
-    let mut groups: Vec<Group> = Vec::new();
-    let mut encoded: Vec<EncodedCluster> = Vec::new();
-    let mut top: Vec<TopCluster> = Vec::new();
-    let mut welded_vertices = 0;
-    let mut level = 0;
-    stats.shards = shards.len() as u64;
-    for shard in shards {
-        let offset = groups.len() as u32;
-        let shift = |g: u32| if g == NO_GROUP { NO_GROUP } else { g + offset };
-        groups.extend(shard.groups);
-        encoded.extend(shard.encoded.into_iter().map(|mut c| {
-            c.group = shift(c.group);
-            c.own_group = shift(c.own_group);
-            c
-        }));
-        top.extend(shard.top.into_iter().map(|mut c| {
-            c.cluster.own_group = shift(c.cluster.own_group);
-            c
-        }));
-        stats.add(&shard.stats);
-        welded_vertices += shard.welded_vertices;
-        degenerate += shard.degenerate;
-        level = level.max(shard.levels);
+    // Later stages: while the top clusters are too many to merge, cut them into new cells
+    // whose borders avoid the previous stage's, and build each a few levels.
+    let mut stage = 1;
+    loop {
+        let triangles: u64 = top.iter().map(|t| t.cluster.indices.len() as u64 / 3).sum();
+        if triangles <= settings.shard_triangles {
+            break;
+        }
+        stage += 1;
+        let quantile = if stage % 2 == 0 { 1.0 / 3.0 } else { 0.5 };
+        let cells = cut_cells(&top, settings.shard_triangles, quantile);
+        progress(&format!("stage {stage}: {triangles} triangles in {} cells", cells.len()));
+        let mut slots: Vec<Option<TopCluster>> = top.into_iter().map(Some).collect();
+        let cell_tops: Vec<Vec<TopCluster>> =
+            cells.iter().map(|ids| ids.iter().map(|&i| slots[i].take().expect("each once")).collect()).collect();
+        let level = dag.level;
+        let results: Vec<CellResult> =
+            cell_tops.into_par_iter().map(|tops| context.build_cell(tops, level, false)).collect::<Result<_, _>>()?;
+        top = dag.collect(results, &mut stats);
+        let left: u64 = top.iter().map(|t| t.cluster.indices.len() as u64 / 3).sum();
+        if left as f64 > SHARD_STOP_REDUCTION * triangles as f64 {
+            break; // the rest is locked geometry (open edges): merging it whole is all that helps
+        }
     }
-    let merged = context.merged_mesh(&top);
-    let clusters = context.top_clusters(&merged, &top)?;
-    let mut builder = Builder::new(&merged, settings, clusters, level, groups.len() as u32);
-    progress(&format!("merge: {} clusters from {} shards", top.len(), stats.shards));
-    while builder.step(progress) {}
-    builder.make_roots();
-    stats.add(&builder.stats);
-    stats.root_groups = builder.stats.root_groups;
-    stats.root_clusters = builder.stats.root_clusters;
-    groups.append(&mut builder.groups);
-    let built = std::mem::take(&mut builder.clusters);
-    drop(builder);
-    let header = Header { source_triangles: kept + degenerate, ..header(&merged, settings) };
-    let encode = |c: &DagCluster, i: usize| EncodedCluster::new(c, &header, i).map_err(BakeError::Write);
-    let base = encoded.len();
-    let mut merged_encoded: Vec<EncodedCluster> = built
-        .par_iter()
-        .enumerate()
-        .map(|(i, c)| match top.get(i) {
-            // A shard's top cluster: its own geometry, its group from the merge.
-            Some(t) => encode(&DagCluster { group: c.group, ..t.cluster.clone() }, base + i),
-            None => encode(&to_dag_cluster(&merged, c), base + i),
-        })
-        .collect::<Result<_, _>>()?;
-    encoded.append(&mut merged_encoded);
+    lap(&mut stats, "stages");
+
+    // Merge what is left into one root.
+    progress(&format!("merge: {} clusters", top.len()));
+    let last = context.build_cell(top, dag.level, true)?;
+    stats.root_groups = last.stats.root_groups;
+    stats.root_clusters = last.stats.root_clusters;
+    let header = last.header;
+    let left = dag.collect(vec![last], &mut stats);
+    debug_assert!(left.is_empty());
+    let header = Header { source_triangles: kept + degenerate, ..header };
+    let Collected { groups, encoded, welded_vertices, degenerate: dropped, .. } = dag;
+    degenerate += dropped;
     lap(&mut stats, "merge");
     Ok(ShardedDag { header, groups, clusters: encoded, stats, welded_vertices, degenerate_dropped: degenerate })
 }
@@ -295,19 +285,102 @@ struct TopCluster {
     own_error: f32,
 }
 
-/// What one shard's build leaves.
-struct ShardResult {
-    /// Groups, with shard-local ids.
+/// Levels each shard, and each cell of a later stage, builds before the top clusters are cut
+/// into new cells. A cell border stays locked this many levels (the band along it lags the
+/// interior by as much); then it lies inside a cell of the next stage and is simplified.
+pub const LEVELS_PER_STAGE: u32 = 3;
+
+/// Group ids a shard or cell assigns are local until its result is collected: this bit marks
+/// them (ids without it are global already).
+const LOCAL: u32 = 1 << 31;
+
+/// What one shard or cell leaves.
+struct CellResult {
+    /// New groups; the group `LOCAL | i` is `groups[i]`.
     groups: Vec<Group>,
-    /// Finished clusters (with shard-local group ids).
+    /// Finished clusters.
     encoded: Vec<EncodedCluster>,
-    /// Clusters left for the merge.
+    /// Clusters without a group yet.
     top: Vec<TopCluster>,
-    stats: BuildStats,
+    /// The level the next groups get.
     levels: u32,
+    stats: BuildStats,
+    /// The header its clusters were encoded for.
+    header: Header,
     triangles: u64,
     welded_vertices: u64,
     degenerate: u64,
+}
+
+/// The groups and encoded clusters collected so far, under global ids.
+#[derive(Default)]
+struct Collected {
+    groups: Vec<Group>,
+    encoded: Vec<EncodedCluster>,
+    /// The highest level reached by any cell so far.
+    level: u32,
+    welded_vertices: u64,
+    degenerate: u64,
+}
+
+impl Collected {
+    /// Takes the results in order, giving their local groups global ids; returns their top
+    /// clusters.
+    fn collect(&mut self, results: Vec<CellResult>, stats: &mut BuildStats) -> Vec<TopCluster> {
+        let mut top = Vec::new();
+        for r in results {
+            let offset = self.groups.len() as u32;
+            let shift = |g: u32| if g != NO_GROUP && g & LOCAL != 0 { (g & !LOCAL) + offset } else { g };
+            self.groups.extend(r.groups);
+            self.encoded.extend(r.encoded.into_iter().map(|mut c| {
+                c.group = shift(c.group);
+                c.own_group = shift(c.own_group);
+                c
+            }));
+            top.extend(r.top.into_iter().map(|mut t| {
+                t.cluster.own_group = shift(t.cluster.own_group);
+                t
+            }));
+            stats.add(&r.stats);
+            self.welded_vertices += r.welded_vertices;
+            self.degenerate += r.degenerate;
+            self.level = self.level.max(r.levels);
+        }
+        top
+    }
+}
+
+/// Splits the top clusters into cells of at most `max_triangles` (by their centres, a k-d
+/// tree cut at the `quantile` of the triangles along the longest axis). Alternating the
+/// quantile between stages keeps a new stage's cell borders off the previous stage's.
+fn cut_cells(top: &[TopCluster], max_triangles: u64, quantile: f64) -> Vec<Vec<usize>> {
+    fn split(top: &[TopCluster], mut ids: Vec<usize>, max: u64, q: f64, out: &mut Vec<Vec<usize>>) {
+        let tri = |i: usize| top[i].cluster.indices.len() as u64 / 3;
+        let total: u64 = ids.iter().map(|&i| tri(i)).sum();
+        if total <= max || ids.len() < 2 {
+            out.push(ids);
+            return;
+        }
+        let centers: Vec<[f32; 3]> = ids.iter().map(|&i| top[i].own_sphere.center).collect();
+        let (lo, hi) = bounds(&centers).expect("non-empty");
+        let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
+        ids.sort_by(|&a, &b| top[a].own_sphere.center[axis].total_cmp(&top[b].own_sphere.center[axis]).then(a.cmp(&b)));
+        let mut at = ids.len() / 2;
+        let mut acc = 0;
+        for (k, &i) in ids.iter().enumerate() {
+            acc += tri(i);
+            if acc as f64 >= q * total as f64 {
+                at = k + 1;
+                break;
+            }
+        }
+        let above = ids.split_off(at.clamp(1, ids.len() - 1));
+        split(top, ids, max, q, out);
+        split(top, above, max, q, out);
+    }
+    let mut out = Vec::new();
+    split(top, (0..top.len()).collect(), max_triangles, quantile, &mut out);
+    out
 }
 
 /// What every shard shares.
@@ -329,16 +402,18 @@ impl ShardContext<'_> {
         welded
     }
 
-    /// Reads a spill file and builds the shard's lower levels.
-    fn build(&self, spill: &Path) -> Result<ShardResult, BakeError> {
+    /// Reads a spill file and builds the shard's first levels.
+    fn build_shard(&self, spill: &Path) -> Result<CellResult, BakeError> {
         let mut bytes = Vec::new();
         BufReader::new(File::open(spill).map_err(spill_error)?).read_to_end(&mut bytes).map_err(spill_error)?;
         let words: Vec<u32> = bytes.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
         drop(bytes);
         // Local vertices: distinct corners, in sorted order (deterministic).
         let corner = |w: &[u32]| Corner { v: w[0], vt: w[1], vn: w[2] };
-        let mut corners: Vec<Corner> =
-            words.chunks_exact(RECORD / 4).flat_map(|r| (0..3).map(move |k| corner(&r[3 * k..3 * k + 3]))).collect();
+        let corners_of = |words: &[u32]| -> Vec<Corner> {
+            words.chunks_exact(RECORD / 4).flat_map(|r| (0..3).map(move |k| corner(&r[3 * k..3 * k + 3]))).collect()
+        };
+        let mut corners = corners_of(&words);
         corners.par_sort_unstable();
         corners.dedup();
         let s = self.source;
@@ -346,9 +421,8 @@ impl ShardContext<'_> {
             positions: corners.iter().map(|c| s.positions[c.v as usize]).collect(),
             normals: self.keep_normals.then(|| corners.iter().map(|c| attribute(s.normals, c.vn)).collect()),
             uvs: self.keep_uvs.then(|| corners.iter().map(|c| attribute(s.uvs, c.vt)).collect()),
-            indices: words
-                .chunks_exact(RECORD / 4)
-                .flat_map(|r| (0..3).map(move |k| corner(&r[3 * k..3 * k + 3])))
+            indices: corners_of(&words)
+                .into_iter()
                 .map(|c| corners.binary_search(&c).expect("corner is present") as u32)
                 .collect(),
             materials: words.chunks_exact(RECORD / 4).map(|r| r[9]).collect(),
@@ -358,47 +432,84 @@ impl ShardContext<'_> {
         let triangles = mesh.triangle_count() as u64;
         let welded = self.weld(&mesh);
         drop(mesh);
+        let mut result = self.run(&welded, level0(&welded, self.settings), Vec::new(), 0, false)?;
+        result.triangles = triangles;
+        result.welded_vertices = welded.positions.len() as u64;
+        result.degenerate = welded.degenerate_dropped;
+        Ok(result)
+    }
 
+    /// Welds top clusters into one mesh and builds on: [`LEVELS_PER_STAGE`] levels, or with
+    /// `to_root` to the root group.
+    fn build_cell(&self, tops: Vec<TopCluster>, level: u32, to_root: bool) -> Result<CellResult, BakeError> {
+        let merged = self.merged_mesh(&tops);
+        let clusters = self.top_clusters(&merged, &tops)?;
+        self.run(&merged, clusters, tops, level, to_root)
+    }
+
+    /// The level loop on `clusters` (the first `inputs.len()` of them are `inputs`, whose
+    /// geometry is kept as it is), then encodes what got a group.
+    fn run(
+        &self,
+        welded: &WeldedMesh,
+        clusters: Vec<Cluster>,
+        inputs: Vec<TopCluster>,
+        level: u32,
+        to_root: bool,
+    ) -> Result<CellResult, BakeError> {
         let quiet: Progress = &|_| {};
-        let mut builder = Builder::new(&welded, self.settings, level0(&welded, self.settings), 0, 0);
-        loop {
-            let before = builder.pending_triangles() as f64;
-            if builder.pending.len() <= 4 * self.settings.group_size as usize || !builder.step(quiet) {
-                break;
-            }
-            if builder.pending_triangles() as f64 > SHARD_STOP_REDUCTION * before {
-                break;
+        let mut builder = Builder::new(welded, self.settings, clusters, level, LOCAL);
+        if to_root {
+            while builder.step(quiet) {}
+            builder.make_roots();
+        } else {
+            loop {
+                let before = builder.pending_triangles() as f64;
+                if builder.level >= level + LEVELS_PER_STAGE
+                    || builder.pending.len() <= 4 * self.settings.group_size as usize
+                    || !builder.step(quiet)
+                {
+                    break;
+                }
+                if builder.pending_triangles() as f64 > SHARD_STOP_REDUCTION * before {
+                    break;
+                }
             }
         }
         let pending = std::mem::take(&mut builder.pending);
-        let header = header(&welded, self.settings);
+        let header = header(welded, self.settings);
         let mut is_top = vec![false; builder.clusters.len()];
         for &c in &pending {
             is_top[c] = true;
         }
+        let geometry = |i: usize, c: &Cluster| match inputs.get(i) {
+            Some(t) => DagCluster { group: c.group, ..t.cluster.clone() },
+            None => to_dag_cluster(welded, c),
+        };
         let encoded: Vec<EncodedCluster> = builder
             .clusters
             .par_iter()
             .enumerate()
             .filter(|(i, _)| !is_top[*i])
-            .map(|(i, c)| EncodedCluster::new(&to_dag_cluster(&welded, c), &header, i).map_err(BakeError::Write))
+            .map(|(i, c)| EncodedCluster::new(&geometry(i, c), &header, i).map_err(BakeError::Write))
             .collect::<Result<_, _>>()?;
         let top = pending
             .iter()
             .map(|&i| {
                 let c = &builder.clusters[i];
-                TopCluster { cluster: to_dag_cluster(&welded, c), own_sphere: c.own_sphere, own_error: c.own_error }
+                TopCluster { cluster: geometry(i, c), own_sphere: c.own_sphere, own_error: c.own_error }
             })
             .collect();
-        Ok(ShardResult {
+        Ok(CellResult {
             groups: std::mem::take(&mut builder.groups),
             encoded,
             top,
             levels: builder.level,
             stats: std::mem::take(&mut builder.stats),
-            triangles,
-            welded_vertices: welded.positions.len() as u64,
-            degenerate: welded.degenerate_dropped,
+            header,
+            triangles: 0,
+            welded_vertices: 0,
+            degenerate: 0,
         })
     }
 

@@ -153,8 +153,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
             return;
         }
         let mut large = large.lock().unwrap_or_else(|e| e.into_inner());
-        let triangles =
-            line.strip_prefix("weld: ").and_then(|t| t.split(' ').next()).and_then(|n| n.parse::<u64>().ok());
+        // "weld: N triangles" (built whole) or "shard: N triangles, …" (sharded).
+        let triangles = line
+            .strip_prefix("weld: ")
+            .or_else(|| line.strip_prefix("shard: "))
+            .and_then(|t| t.split(' ').next())
+            .and_then(|n| n.parse::<u64>().ok());
         if triangles.is_some_and(|n| n >= LARGE_ASSET_TRIANGLES) {
             large.insert(asset.to_path_buf());
         }

@@ -321,6 +321,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
+/// Fractions of the largest extent at which `inspect` counts the triangles of uniform cuts:
+/// 0, then half-decades from 1e-5 to 1e-1.
+const INSPECT_CUTS: [f32; 10] = [0.0, 1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1];
+
 fn inspect(f: &MresFile, json: bool) -> Result<()> {
     let h = &f.header;
     let level0 = f.clusters.iter().filter(|c| c.own_group == NO_GROUP).count();
@@ -334,7 +338,7 @@ fn inspect(f: &MresFile, json: bool) -> Result<()> {
         "root_groups": f.groups.iter().filter(|g| g.error.is_infinite()).count(),
         // Triangles drawn by uniform cuts at fixed fractions of the largest extent: comparable
         // between two bakes of one mesh (e.g. sharded and whole).
-        "cut_triangles_at_extent_fraction": CUT_THRESHOLDS.iter().map(|&t| {
+        "cut_triangles_at_extent_fraction": INSPECT_CUTS.iter().map(|&t| {
             let extent = h.grid.step * ((1u64 << h.position_bits) - 1) as f32;
             let cut = select::uniform_cut(&f.groups, &f.clusters, t * extent);
             (t, cut.iter().map(|&c| f.clusters[c as usize].triangle_count as u64).sum::<u64>())
