@@ -68,6 +68,7 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings, progress: crate::ba
         })
         .collect();
     let (always_locked, special) = open_and_nonmanifold(mesh);
+    let part_size = crate::deviation::part_sizes(mesh);
     lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", clusters.len()));
     let mut groups: Vec<Group> = Vec::new();
@@ -101,9 +102,12 @@ pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings, progress: crate::ba
             .map(|part| {
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
                 let s = simplify_group(mesh, &merged, locked, &special, settings)?;
+                let members_error = part.iter().map(|&c| clusters[pending[c as usize]].own_error).fold(0.0, f32::max);
+                let error =
+                    crate::deviation::group_error(mesh, &merged, &s.indices, &part_size, members_error, s.error);
                 Some((
                     split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings),
-                    s.error,
+                    error,
                     s.method,
                 ))
             })
