@@ -4,8 +4,9 @@
 //! For a few uniform cuts (thresholds at quantiles of the stored errors), points are sampled
 //! on the cut and on the level-0 surface and the two-sided distance is measured with a
 //! bounding-volume hierarchy: a point on a drawn cluster is compared with that cluster's own
-//! error; a point on the original surface with the own error of the drawn cluster nearest to
-//! it. The worst and 99th-percentile ratios are reported.
+//! error; a point on the original surface with the largest own error among the drawn clusters
+//! that replace its level-0 cluster (its drawn ancestors), whichever drawn cluster is nearest
+//! to it. The worst and 99th-percentile ratios are reported.
 
 use crate::bvh::Bvh;
 use crate::parts::{diagonals, UnionFind};
