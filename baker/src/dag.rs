@@ -8,9 +8,10 @@
 //! parallel but collected in partition order.
 
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
+use crate::deviation::{group_error, part_sizes};
 use crate::edges::sorted_edge_keys;
 use crate::partition::{cluster_graph, partition};
-use crate::settings::BakeSettings;
+use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Method};
 use crate::weld::WeldedMesh;
 use formats::mres::{Dag, DagCluster, Group, Header, Sphere, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS, NO_GROUP};
@@ -104,6 +105,8 @@ pub(crate) struct Builder<'a> {
     always_locked: Vec<bool>,
     /// Open and non-manifold edges with their use counts (see `open_and_nonmanifold`).
     special: Vec<(u64, u32)>,
+    /// Per position id, the size of its connected part (see `deviation::part_sizes`).
+    part_size: Vec<f32>,
     /// Every cluster built so far.
     pub clusters: Vec<Cluster>,
     /// Every group formed so far; ids are `first_group` + index.
@@ -128,6 +131,10 @@ impl<'a> Builder<'a> {
         first_group: u32,
     ) -> Self {
         let (always_locked, special) = open_and_nonmanifold(mesh);
+        let part_size = match settings.error_bound {
+            ErrorBound::Measured => part_sizes(mesh),
+            ErrorBound::Simplifier => Vec::new(),
+        };
         let pending = (0..clusters.len()).collect();
         let stats = BuildStats::default();
         Builder {
@@ -135,6 +142,7 @@ impl<'a> Builder<'a> {
             settings,
             always_locked,
             special,
+            part_size,
             clusters,
             groups: Vec::new(),
             first_group,
@@ -175,15 +183,23 @@ impl<'a> Builder<'a> {
             let p = mesh.position_ids[v as usize] as usize;
             owner[p] == u32::MAX - 1 || always_locked[p]
         };
-        let special = &self.special;
+        let (special, part_size) = (&self.special, &self.part_size);
+        let own_errors: Vec<f32> = self.pending.iter().map(|&c| clusters[c].own_error).collect();
         let results: Vec<Option<(Vec<Vec<u32>>, f32, Method)>> = parts
             .par_iter()
             .map(|part| {
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
                 let s = simplify_group(mesh, &merged, locked, special, settings)?;
+                let error = match settings.error_bound {
+                    ErrorBound::Measured => {
+                        let members = part.iter().map(|&c| own_errors[c as usize]).fold(0.0, f32::max);
+                        group_error(mesh, &merged, &s.indices, part_size, members, s.error)
+                    }
+                    ErrorBound::Simplifier => s.error,
+                };
                 Some((
                     split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings),
-                    s.error,
+                    error,
                     s.method,
                 ))
             })

@@ -2,6 +2,19 @@
 
 use serde::{Deserialize, Serialize};
 
+/// How a group's stored error is obtained (DESIGN.md invariant 4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ErrorBound {
+    /// Measured: the members' error plus the sampled two-sided distance between the group's
+    /// input and output (`deviation.rs`): a bound the validator checks at ratio 1. Costs about
+    /// 2.5× the bake time and draws more triangles at a given τ (the bound is conservative).
+    Measured,
+    /// meshoptimizer's estimate made monotone, as clusterlod stores it: fast and tight, but not
+    /// a bound (the validator measured up to 2.6× it on scans, 40–130× at single spots).
+    Simplifier,
+}
+
 /// Settings of one bake. Each field says which step it feeds; [`BakeSettings::default`]
 /// gives the defaults and why.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -27,6 +40,8 @@ pub struct BakeSettings {
     pub normal_weight: f32,
     /// Simplify: weight of UVs against positions in the attribute-aware quadric.
     pub uv_weight: f32,
+    /// Simplify: how group errors are obtained, `"measured"` (honest) or `"simplifier"`.
+    pub error_bound: ErrorBound,
     /// Write: zstd level of the pages (1..=22).
     pub zstd_level: i32,
     /// Shard: a mesh with more triangles than this is split spatially into shards of about
@@ -55,6 +70,8 @@ impl Default for BakeSettings {
             stuck_ratio: 0.85,
             normal_weight: 0.5,
             uv_weight: 0.5,
+            // Honest by default: a renderer trusts the error to bound what it sees.
+            error_bound: ErrorBound::Measured,
             // zstd 9 on headers and indices (positions and normals, near-random, always use level 1):
             // level 15 is 1.3% smaller but its binary-tree matcher costs ~10% of the bake time.
             zstd_level: 9,

@@ -2,6 +2,7 @@
 //! (meshopt `simplify_with_attributes_and_locks`, absolute error, normals and UVs weighted),
 //! with a permissive and then a sloppy fallback when the group is stuck (as clusterlod does).
 
+use crate::parts::{diagonals, UnionFind};
 use crate::settings::BakeSettings;
 use crate::weld::WeldedMesh;
 use meshopt::{SimplifyOptions, VertexDataAdapter};
@@ -275,52 +276,31 @@ fn prune_components(
 ) -> (Vec<u32>, f32) {
     // Components by position: union vertices of each triangle, and vertices sharing a position.
     let n = positions.len();
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    fn find(parent: &mut [u32], mut x: u32) -> u32 {
-        while parent[x as usize] != x {
-            parent[x as usize] = parent[parent[x as usize] as usize];
-            x = parent[x as usize];
-        }
-        x
-    }
-    let union = |parent: &mut Vec<u32>, a: u32, b: u32| {
-        let (ra, rb) = (find(parent, a), find(parent, b));
-        if ra != rb {
-            parent[ra.max(rb) as usize] = ra.min(rb);
-        }
-    };
+    let mut sets = UnionFind::new(n);
     for t in local.chunks_exact(3) {
-        union(&mut parent, t[0], t[1]);
-        union(&mut parent, t[1], t[2]);
+        sets.union(t[0], t[1]);
+        sets.union(t[1], t[2]);
     }
     let mut by_position: Vec<(u32, u32)> =
         (0..n as u32).map(|v| (mesh.position_ids[vertices[v as usize] as usize], v)).collect();
     by_position.sort_unstable();
     for run in by_position.chunk_by(|a, b| a.0 == b.0) {
         for w in run.windows(2) {
-            union(&mut parent, w[0].1, w[1].1);
+            sets.union(w[0].1, w[1].1);
         }
     }
-    let root: Vec<u32> = (0..n as u32).map(|v| find(&mut parent, v)).collect();
+    let root: Vec<u32> = (0..n as u32).map(|v| sets.find(v)).collect();
     // Per component: bounds, triangle count, locked.
-    let mut lo = vec![[f32::INFINITY; 3]; n];
-    let mut hi = vec![[f32::NEG_INFINITY; 3]; n];
+    let diagonal = diagonals(&mut sets, positions.iter().enumerate().map(|(v, p)| (v as u32, p.map(f64::from))));
+    let diagonal = |r: usize| diagonal[r] as f32;
     let mut locked = vec![false; n];
     let mut triangles = vec![0usize; n];
     for v in 0..n {
-        let r = root[v] as usize;
-        for k in 0..3 {
-            lo[r][k] = lo[r][k].min(positions[v][k]);
-            hi[r][k] = hi[r][k].max(positions[v][k]);
-        }
-        locked[r] |= locks[v];
+        locked[root[v] as usize] |= locks[v];
     }
     for t in local.chunks_exact(3) {
         triangles[root[t[0] as usize] as usize] += 1;
     }
-    let diagonal = |r: usize| {
-        ((hi[r][0] - lo[r][0]).powi(2) + (hi[r][1] - lo[r][1]).powi(2) + (hi[r][2] - lo[r][2]).powi(2)).sqrt()
-    };
     let mut candidates: Vec<usize> = (0..n).filter(|&r| triangles[r] > 0 && !locked[r]).collect();
     candidates.sort_by(|&a, &b| diagonal(a).total_cmp(&diagonal(b)).then(a.cmp(&b)));
     let mut removed = vec![false; n];
