@@ -7,7 +7,7 @@ use std::sync::Arc;
 use formats::mres::{write_mres, Dag, DagCluster, Grid, Group, Header, MresFile, Sphere, UvQuant, NO_GROUP};
 use preview::camera::Camera;
 use preview::gpu_types::{FLAG_DROP_SOME, FLAG_FRUSTUM_CULL, MODE_CLUSTER, MODE_LEVEL, MODE_SHADED};
-use preview::image::count_flagged;
+use preview::image::{count_flagged, count_model};
 use preview::scene::SceneData;
 use preview::verify::{verify, VerifyOptions};
 use preview::vk::{validation_available, ContextOptions, Device, DrawPath, MessageCounts, Renderer, RendererOptions};
@@ -320,4 +320,95 @@ fn mesh_and_fallback_paths_agree() {
     drop((mesh, fallback));
     drop(device);
     assert_silent(&counts);
+}
+
+/// Decodes an RGBA8 PNG written by the preview.
+fn read_png(path: &std::path::Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.color_type, info.bit_depth), (png::ColorType::Rgba, png::BitDepth::Eight));
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, buf)
+}
+
+#[test]
+fn window_without_a_display_suggests_headless() {
+    let dir = std::env::temp_dir().join(format!("mres-preview-nodisplay-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mres = dir.join("cube.mres");
+    std::fs::write(&mres, write_mres(&cube_dag(2), 3).unwrap()).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_preview"))
+        .arg(&mres)
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("no display") && stderr.contains("--headless"), "{stderr}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The window path under Xvfb (`xvfb-run`; CI sets `MRES_PREVIEW_REQUIRE_WINDOW=1` so that a
+/// missing Xvfb fails instead of skipping): a few frames with validation on, and the last
+/// presented frame, read back from the swapchain image, equals the headless render of the same
+/// camera, size and mode bit for bit (same renderer; blit into the swapchain).
+#[test]
+fn window_under_xvfb_shows_the_headless_image() {
+    let window_required = std::env::var("MRES_PREVIEW_REQUIRE_WINDOW").is_ok_and(|v| v == "1");
+    let has_xvfb = std::process::Command::new("sh").args(["-c", "command -v xvfb-run && command -v xauth"]).output().is_ok_and(|o| o.status.success());
+    if !has_xvfb {
+        assert!(!window_required, "MRES_PREVIEW_REQUIRE_WINDOW=1 but xvfb-run or xauth is not installed");
+        println!("window: SKIPPED, no xvfb-run");
+        return;
+    }
+    if let Err(e) = Device::new(&ContextOptions::default()) {
+        assert!(!gpu_required() && !window_required, "no Vulkan device: {e:#}");
+        println!("window: SKIPPED, no Vulkan device");
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("mres-preview-window-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mres = dir.join("cube.mres");
+    std::fs::write(&mres, write_mres(&cube_dag(6), 3).unwrap()).unwrap();
+    let (window_png, headless_png) = (dir.join("window.png"), dir.join("headless.png"));
+    let common = ["--size", "200x150", "--mode", "cluster", "--tau", "0.5"];
+    let validate = if validation_available() { &["--validate"][..] } else { &[] };
+    let out = std::process::Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 640x480x24"])
+        .arg(env!("CARGO_BIN_EXE_preview"))
+        .arg(&mres)
+        .args(common)
+        .args(validate)
+        .args(["--frames", "4", "--out"])
+        .arg(&window_png)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success());
+    assert!(stdout.contains("window: 4 frames at 200x150"), "{stdout}");
+    if !validate.is_empty() {
+        assert!(stdout.contains("validation messages: 0 errors, 0 warnings"), "{stdout}");
+    }
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_preview"))
+        .arg(&mres)
+        .args(common)
+        .arg("--headless")
+        .arg("--out")
+        .arg(&headless_png)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (window, headless) = (read_png(&window_png), read_png(&headless_png));
+    assert_eq!((window.0, window.1), (200, 150));
+    assert_eq!((window.0, window.1), (headless.0, headless.1));
+    let differing = window.2.chunks(4).zip(headless.2.chunks(4)).filter(|(a, b)| a != b).count();
+    assert_eq!(differing, 0, "{differing} pixels differ between the window and the headless render");
+    // The cube is in view (more than background), with no back face showing.
+    assert!(count_model(&window.2) > 5000, "{} model pixels", count_model(&window.2));
+    assert_eq!(count_flagged(&window.2), 0);
+    std::fs::remove_dir_all(&dir).unwrap();
 }
