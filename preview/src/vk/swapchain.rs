@@ -23,7 +23,7 @@ pub struct Surface {
     /// The surface handle.
     pub raw: vk::SurfaceKHR,
     // Dropped after the surface (fields drop after `Drop::drop`): the window outlives it.
-    _window: Box<dyn Any>,
+    _window: Box<dyn Any + Send + Sync>,
     _instance: Arc<Instance>,
 }
 
@@ -39,7 +39,7 @@ impl Surface {
     /// Creates a surface for `window` on `device`'s instance and checks that the device's queue
     /// can present to it. The device must have been created with
     /// [`super::ContextOptions::display`] set to this window's display.
-    pub fn new<W: HasWindowHandle + HasDisplayHandle + 'static>(device: &Arc<Device>, window: Arc<W>) -> Result<Arc<Surface>> {
+    pub fn new<W: HasWindowHandle + HasDisplayHandle + Send + Sync + 'static>(device: &Arc<Device>, window: Arc<W>) -> Result<Arc<Surface>> {
         if !device.info.swapchain_enabled {
             bail!("the Vulkan device was created without a display (ContextOptions::display)");
         }
