@@ -73,10 +73,7 @@ impl ObjVertices {
             let Some(keyword) = words.next() else { return Ok(()) };
             match keyword {
                 "v" => {
-                    let c = numbers::<4>(words, line_no, "v")?;
-                    let w =
-                        if c[3].is_finite() && c[3] != 0.0 && line.split_whitespace().count() > 4 { c[3] } else { 1.0 };
-                    let p = [c[0] / w, c[1] / w, c[2] / w];
+                    let p = position(words, line_no)?;
                     if !p.iter().all(|x| x.is_finite()) {
                         return Err(ImportErrorKind::NonFinitePosition(format!("line {line_no}: v {p:?}")));
                     }
@@ -85,12 +82,12 @@ impl ObjVertices {
                     counts[0] += 1;
                 }
                 "vt" => {
-                    let c = numbers::<2>(words, line_no, "vt")?;
+                    let c = numbers::<2>(&mut words, line_no, "vt")?;
                     out.uvs.push(c.map(|x| if x.is_finite() { x } else { 0.0 }));
                     counts[1] += 1;
                 }
                 "vn" => {
-                    let c = numbers::<3>(words, line_no, "vn")?;
+                    let c = numbers::<3>(&mut words, line_no, "vn")?;
                     out.normals.push(unit_or_zero(c));
                     counts[2] += 1;
                 }
@@ -204,26 +201,37 @@ fn for_each_line(path: &Path, mut f: impl FnMut(usize, &str) -> KindResult<()>) 
     }
 }
 
-/// The first `N` numbers after a keyword; missing ones are 0 (`w` of a `v` line: NaN, which
-/// the caller reads as absent).
-fn numbers<const N: usize>(
-    mut words: std::str::SplitWhitespace<'_>,
+/// The first `N` numbers after a keyword (more are ignored, as tobj does).
+fn numbers<'a, const N: usize>(
+    words: &mut impl Iterator<Item = &'a str>,
     line_no: usize,
     keyword: &str,
 ) -> KindResult<[f32; N]> {
     let mut out = [0.0f32; N];
-    for (k, x) in out.iter_mut().enumerate() {
-        match words.next() {
-            Some(w) => {
-                *x = w.parse().map_err(|_| parse_error(line_no, &format!("bad number {w:?} in a {keyword} line")))?
-            }
-            None if k < 3 && keyword == "v" => {
-                return Err(parse_error(line_no, "v line with fewer than 3 coordinates"));
-            }
-            None => *x = if k == 3 { f32::NAN } else { 0.0 },
-        }
+    for x in out.iter_mut() {
+        let w =
+            words.next().ok_or_else(|| parse_error(line_no, &format!("{keyword} line with fewer than {N} numbers")))?;
+        *x = w.parse().map_err(|_| parse_error(line_no, &format!("bad number {w:?} in a {keyword} line")))?;
     }
     Ok(out)
+}
+
+/// A `v` line after its keyword, read as tobj reads it: `x y z`, then nothing, `w` (which
+/// divides the coordinates; 0 is an error) or three colour values (ignored).
+fn position(mut words: std::str::SplitWhitespace<'_>, line_no: usize) -> KindResult<[f32; 3]> {
+    let p = numbers::<3>(&mut words, line_no, "v")?;
+    match (words.next(), words.next(), words.next(), words.next()) {
+        (None, ..) => Ok(p),
+        (Some(w), None, ..) => {
+            let w: f32 = w.parse().map_err(|_| parse_error(line_no, &format!("bad w {w:?} in a v line")))?;
+            if w == 0.0 {
+                return Err(parse_error(line_no, "v line with w = 0"));
+            }
+            Ok(p.map(|c| c / w))
+        }
+        (Some(_), Some(_), Some(_), None) => Ok(p), // a vertex colour
+        _ => Err(parse_error(line_no, "v line with 2 or more than 3 values after x y z")),
+    }
 }
 
 /// Resolves one `v/vt/vn` face vertex against the element counts so far. With
