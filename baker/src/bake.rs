@@ -80,20 +80,16 @@ pub fn bake_file_with_progress(path: &Path, settings: &BakeSettings, progress: P
         && size / OBJ_MIN_BYTES_PER_TRIANGLE > settings.shard_triangles
     {
         settings.check().map_err(BakeError::Settings)?;
-        let obj = ObjVertices::read(path, &limits)?;
+        let mut obj = ObjVertices::read(path, &limits)?;
         if obj.triangles > settings.shard_triangles {
             let import_seconds = start.elapsed().as_secs_f64();
             tracing::info!(triangles = obj.triangles, seconds = import_seconds, "streaming import, pass 1");
+            let (positions, normals, uvs) =
+                (std::mem::take(&mut obj.positions), std::mem::take(&mut obj.normals), std::mem::take(&mut obj.uvs));
             let for_each = |f: &mut dyn FnMut([Corner; 3], u32)| obj.for_each_triangle(path, f);
-            let source = ShardSource {
-                positions: &obj.positions,
-                normals: &obj.normals,
-                uvs: &obj.uvs,
-                triangles: obj.triangles,
-                for_each_triangle: &for_each,
-            };
-            let dag = build_sharded(&source, settings, progress)?;
-            drop(obj); // the vertex arrays are not needed to write
+            let source =
+                ShardSource { positions, normals, uvs, triangles: obj.triangles, for_each_triangle: &for_each };
+            let dag = build_sharded(source, settings, progress)?;
             let mut baked = write_sharded(dag, settings, progress)?;
             baked.stats.import_seconds = import_seconds;
             baked.stats.build_seconds = start.elapsed().as_secs_f64() - import_seconds;
@@ -121,29 +117,29 @@ pub fn bake_mesh_with_progress(
 ) -> Result<Baked, BakeError> {
     settings.check().map_err(BakeError::Settings)?;
     if mesh.triangle_count() as u64 > settings.shard_triangles {
+        let SourceMesh { positions, normals, uvs, indices, materials, degenerate_dropped } = mesh;
         let index_or_none = |present: bool| if present { |v: u32| v } else { |_: u32| NONE };
-        let (vn, vt) = (index_or_none(mesh.normals.is_some()), index_or_none(mesh.uvs.is_some()));
+        let (vn, vt) = (index_or_none(normals.is_some()), index_or_none(uvs.is_some()));
         let for_each = |f: &mut dyn FnMut([Corner; 3], u32)| {
-            for (t, &material) in mesh.indices.chunks_exact(3).zip(&mesh.materials) {
+            for (t, &material) in indices.chunks_exact(3).zip(&materials) {
                 f([0, 1, 2].map(|k| Corner { v: t[k], vt: vt(t[k]), vn: vn(t[k]) }), material);
             }
             Ok(())
         };
         let source = ShardSource {
-            positions: &mesh.positions,
-            normals: mesh.normals.as_deref().unwrap_or_default(),
-            uvs: mesh.uvs.as_deref().unwrap_or_default(),
-            triangles: mesh.triangle_count() as u64,
+            positions,
+            normals: normals.unwrap_or_default(),
+            uvs: uvs.unwrap_or_default(),
+            triangles: materials.len() as u64,
             for_each_triangle: &for_each,
         };
         let start = Instant::now();
-        let dag = build_sharded(&source, settings, progress)?;
-        let dropped = mesh.degenerate_dropped;
-        drop(mesh);
+        let dag = build_sharded(source, settings, progress)?;
+        drop((indices, materials));
         let mut baked = write_sharded(dag, settings, progress)?;
         baked.stats.build_seconds = start.elapsed().as_secs_f64();
-        baked.stats.degenerate_dropped += dropped;
-        baked.stats.source_triangles += dropped;
+        baked.stats.degenerate_dropped += degenerate_dropped;
+        baked.stats.source_triangles += degenerate_dropped;
         return Ok(baked);
     }
     let start = Instant::now();

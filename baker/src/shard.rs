@@ -42,14 +42,15 @@ pub const SHARD_STOP_REDUCTION: f64 = 0.75;
 /// Most vertices sampled to place the cell boundaries.
 const CELL_SAMPLE: usize = 1 << 20;
 
-/// The vertex attributes of a mesh to shard, and a way to stream its triangles.
+/// The vertex attributes of a mesh to shard (owned: they are freed once the shards are read),
+/// and a way to stream its triangles.
 pub struct ShardSource<'a> {
     /// Positions (finite).
-    pub positions: &'a [[f32; 3]],
+    pub positions: Vec<[f32; 3]>,
     /// Normals, or empty.
-    pub normals: &'a [[f32; 3]],
+    pub normals: Vec<[f32; 3]>,
     /// UVs, or empty.
-    pub uvs: &'a [[f32; 2]],
+    pub uvs: Vec<[f32; 2]>,
     /// Triangles to stream (an estimate is fine: it only sizes the cells).
     pub triangles: u64,
     /// Calls its argument with every triangle's corners (attributes absent: [`NONE`]) and
@@ -79,7 +80,7 @@ const RECORD: usize = 40;
 
 /// Builds the DAG of `source` in shards of about `settings.shard_triangles` triangles.
 pub fn build_sharded(
-    source: &ShardSource,
+    source: ShardSource,
     settings: &BakeSettings,
     progress: Progress,
 ) -> Result<ShardedDag, BakeError> {
@@ -89,12 +90,12 @@ pub fn build_sharded(
         stats.stage_seconds.push((stage.to_string(), clock.elapsed().as_secs_f64()));
         clock = std::time::Instant::now();
     };
-    let (lo, hi) = bounds(source.positions).ok_or(BakeError::Empty(0))?;
+    let (lo, hi) = bounds(&source.positions).ok_or(BakeError::Empty(0))?;
     let grid = Grid::covering(lo, hi, settings.position_bits);
     let keep_uvs = settings.keep_uvs && !source.uvs.is_empty();
     let keep_normals = settings.keep_normals && !source.normals.is_empty();
-    let uv = if keep_uvs { uv_quant(source.uvs) } else { uv_quant(&[]) };
-    let cells = Cells::new(source, settings.shard_triangles);
+    let uv = if keep_uvs { uv_quant(&source.uvs) } else { uv_quant(&[]) };
+    let cells = Cells::new(&source, settings.shard_triangles);
     progress(&format!("shard: {} triangles into {} cells", source.triangles, cells.count()));
 
     // Spill every triangle to its cell's file.
@@ -141,11 +142,11 @@ pub fn build_sharded(
     lap(&mut stats, "spill");
 
     // Stage 1: build the shards from their spill files.
-    let context = ShardContext { source, settings, grid, uv, keep_normals, keep_uvs, multi_material };
+    let context = ShardContext { settings, grid, uv, keep_normals, keep_uvs, multi_material };
     let shards: Vec<CellResult> = (0..cells.count())
         .into_par_iter()
         .map(|s| {
-            let result = context.build_shard(&dir.path().join(format!("{s}.bin")));
+            let result = context.build_shard(&source, &dir.path().join(format!("{s}.bin")));
             if let Ok(r) = &result {
                 progress(&format!(
                     "shard {}/{}: {} triangles, {} levels, {} top clusters",
@@ -159,7 +160,7 @@ pub fn build_sharded(
             result
         })
         .collect::<Result<_, _>>()?;
-    drop(dir);
+    drop((dir, source)); // the vertex attributes are not needed any more
     stats.shards = shards.len() as u64;
     let mut dag = Collected::default();
     let mut top = dag.collect(shards, &mut stats);
@@ -385,7 +386,6 @@ fn cut_cells(top: &[TopCluster], max_triangles: u64, quantile: f64) -> Vec<Vec<u
 
 /// What every shard shares.
 struct ShardContext<'a> {
-    source: &'a ShardSource<'a>,
     settings: &'a BakeSettings,
     grid: Grid,
     uv: UvQuant,
@@ -403,7 +403,7 @@ impl ShardContext<'_> {
     }
 
     /// Reads a spill file and builds the shard's first levels.
-    fn build_shard(&self, spill: &Path) -> Result<CellResult, BakeError> {
+    fn build_shard(&self, source: &ShardSource, spill: &Path) -> Result<CellResult, BakeError> {
         let mut bytes = Vec::new();
         BufReader::new(File::open(spill).map_err(spill_error)?).read_to_end(&mut bytes).map_err(spill_error)?;
         let words: Vec<u32> = bytes.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
@@ -416,11 +416,11 @@ impl ShardContext<'_> {
         let mut corners = corners_of(&words);
         corners.par_sort_unstable();
         corners.dedup();
-        let s = self.source;
+        let s = source;
         let mesh = SourceMesh {
             positions: corners.iter().map(|c| s.positions[c.v as usize]).collect(),
-            normals: self.keep_normals.then(|| corners.iter().map(|c| attribute(s.normals, c.vn)).collect()),
-            uvs: self.keep_uvs.then(|| corners.iter().map(|c| attribute(s.uvs, c.vt)).collect()),
+            normals: self.keep_normals.then(|| corners.iter().map(|c| attribute(&s.normals, c.vn)).collect()),
+            uvs: self.keep_uvs.then(|| corners.iter().map(|c| attribute(&s.uvs, c.vt)).collect()),
             indices: corners_of(&words)
                 .into_iter()
                 .map(|c| corners.binary_search(&c).expect("corner is present") as u32)
