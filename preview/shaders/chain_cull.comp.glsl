@@ -15,18 +15,8 @@ layout(set = 0, binding = 14, std430) readonly buffer ChainBlock { vec4 chain_le
 // One VkDrawIndexedIndirectCommand (5 words) per level.
 layout(set = 0, binding = 15, std430) buffer DrawBlock { uint draws[]; };
 
-bool sphere_in_frustum(vec4 sphere) {
-    for (int i = 0; i < 6; i++) {
-        vec4 plane = view.frustum[i];
-        if (dot(plane.xyz, sphere.xyz) + plane.w < -sphere.w) {
-            return false;
-        }
-    }
-    return true;
-}
-
 void main() {
-    uint i = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * gl_WorkGroupSize.x + gl_LocalInvocationID.x;
+    uint i = grid_invocation_index();
     if (i >= view.instance_count) {
         return;
     }

@@ -264,6 +264,27 @@ float projected_error(vec4 sphere, float error, vec3 eye) {
     return p;
 }
 
+// Whether the sphere (xyz centre, w radius; world space) is at least partly inside the
+// view frustum (View.frustum: six inward planes, dot(plane.xyz, p) + plane.w >= 0 inside).
+bool sphere_in_frustum(vec4 sphere) {
+    for (int i = 0; i < 6; i++) {
+        vec4 plane = view.frustum[i];
+        if (dot(plane.xyz, sphere.xyz) + plane.w < -sphere.w) {
+            return false;
+        }
+    }
+    return true;
+}
+
+// Index of this invocation in a compute dispatch laid out as a 2D grid of 1D workgroups whose
+// rows are gl_NumWorkGroups.x wide (the culling passes; the Rust side splits the groups so).
+// Only for compute shaders.
+#ifdef GL_COMPUTE_SHADER
+uint grid_invocation_index() {
+    return (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * gl_WorkGroupSize.x + gl_LocalInvocationID.x;
+}
+#endif
+
 // A colour for an integer, never pure red (the crack test's flag).
 vec3 id_color(uint id) {
     uint h = id * 0x9E3779B1u;

@@ -20,18 +20,8 @@ layout(set = 0, binding = 4, std430) buffer CounterBlock { Counters counters; };
 layout(set = 0, binding = 9, std430) readonly buffer BinBlock { LevelBin bins[]; };
 layout(set = 0, binding = 10, std430) writeonly buffer WorkBlock { uvec4 work[]; };
 
-bool sphere_in_frustum(vec4 sphere) {
-    for (int i = 0; i < 6; i++) {
-        vec4 plane = view.frustum[i];
-        if (dot(plane.xyz, sphere.xyz) + plane.w < -sphere.w) {
-            return false;
-        }
-    }
-    return true;
-}
-
 void main() {
-    uint i = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * gl_WorkGroupSize.x + gl_LocalInvocationID.x;
+    uint i = grid_invocation_index();
     if (i >= view.instance_count || view.bin_count == 0u) {
         return;
     }

@@ -16,16 +16,6 @@ layout(set = 0, binding = 7, std430) writeonly buffer ProjectedBlock { vec2 proj
 layout(set = 0, binding = 10, std430) readonly buffer WorkBlock { uvec4 work[]; };
 layout(set = 0, binding = 11, std430) readonly buffer LevelOrderBlock { uint level_order[]; };
 
-bool sphere_in_frustum(vec4 sphere) {
-    for (int i = 0; i < 6; i++) {
-        vec4 plane = view.frustum[i];
-        if (dot(plane.xyz, sphere.xyz) + plane.w < -sphere.w) {
-            return false;
-        }
-    }
-    return true;
-}
-
 void main() {
     uint w = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
     if (w >= counters.work_count) {

@@ -10,11 +10,9 @@ use ash::vk;
 use bytemuck::{bytes_of, cast_slice};
 
 use super::context::Device;
-use super::renderer::{barrier, compute_pipeline, gpu_buffer, COLOR_FORMAT, DEPTH_FORMAT};
-use super::resources::{
-    subresource_range, Buffer, CommandPool, DescriptorPool, DescriptorSetLayout, Fence, Image, Location, Pipeline,
-    PipelineLayout, QueryPool, ShaderModule,
-};
+use super::pipelines::{compute_pipeline, draw_pipeline, Commands, Descriptors};
+use super::renderer::{barrier, gpu_buffer, COLOR_FORMAT, DEPTH_FORMAT};
+use super::resources::{subresource_range, Buffer, Image, Location, Pipeline};
 use crate::gpu_types::GpuView;
 use crate::lod_chain::LodChain;
 
@@ -44,16 +42,10 @@ pub struct ChainRenderer {
     draws_readback: Buffer,
     indices: vk::Buffer,
     target: Option<(Image, Image)>,
-    _set_layout: DescriptorSetLayout,
-    layout: PipelineLayout,
-    _pool: DescriptorPool,
-    set: vk::DescriptorSet,
+    descriptors: Descriptors,
     cull: Pipeline,
     draw: Pipeline,
-    _command_pool: CommandPool,
-    cmd: vk::CommandBuffer,
-    fence: Fence,
-    queries: Option<QueryPool>,
+    commands: Commands,
 }
 
 impl Drop for ChainRenderer {
@@ -87,62 +79,11 @@ impl ChainRenderer {
         // unused in shaded mode), then 12 positions, 13 instance lists, 14 levels, 15 draws.
         let bound: [(u32, &Buffer); 8] = [(0, &view), (1, &dummy), (5, &dummy), (8, &instance_buffer), (12, &positions),
             (13, &list), (14, &level_buffer), (15, &draws)];
-        let bindings: Vec<vk::DescriptorSetLayoutBinding> = bound
-            .iter()
-            .map(|(b, _)| {
-                vk::DescriptorSetLayoutBinding::default()
-                    .binding(*b)
-                    .descriptor_type(if *b == 0 { vk::DescriptorType::UNIFORM_BUFFER } else { vk::DescriptorType::STORAGE_BUFFER })
-                    .descriptor_count(1)
-                    .stage_flags(vk::ShaderStageFlags::ALL)
-            })
-            .collect();
-        // SAFETY: object creation from valid create infos; handles go straight into owners;
-        // descriptor writes reference buffers owned by the returned value.
-        let (set_layout, layout, pool, set, command_pool, cmd, fence, queries) = unsafe {
-            let set_layout = DescriptorSetLayout::from_raw(device, device.raw.create_descriptor_set_layout(
-                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings), None)?);
-            let layouts = [set_layout.raw];
-            let layout = PipelineLayout::from_raw(device, device.raw.create_pipeline_layout(
-                &vk::PipelineLayoutCreateInfo::default().set_layouts(&layouts), None)?);
-            let sizes = [
-                vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: 1 },
-                vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: 7 },
-            ];
-            let pool = DescriptorPool::from_raw(device, device.raw.create_descriptor_pool(
-                &vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)?);
-            let set = device.raw.allocate_descriptor_sets(
-                &vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool.raw).set_layouts(&layouts))?[0];
-            let infos: Vec<[vk::DescriptorBufferInfo; 1]> =
-                bound.iter().map(|(_, b)| [vk::DescriptorBufferInfo { buffer: b.raw, offset: 0, range: vk::WHOLE_SIZE }]).collect();
-            let writes: Vec<vk::WriteDescriptorSet> = bound
-                .iter()
-                .zip(&infos)
-                .map(|((b, _), info)| {
-                    vk::WriteDescriptorSet::default()
-                        .dst_set(set)
-                        .dst_binding(*b)
-                        .descriptor_type(if *b == 0 { vk::DescriptorType::UNIFORM_BUFFER } else { vk::DescriptorType::STORAGE_BUFFER })
-                        .buffer_info(info)
-                })
-                .collect();
-            device.raw.update_descriptor_sets(&writes, &[]);
-            let command_pool = CommandPool::from_raw(device, device.raw.create_command_pool(
-                &vk::CommandPoolCreateInfo::default().queue_family_index(device.queue_family)
-                    .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER), None)?);
-            let cmd = device.raw.allocate_command_buffers(&vk::CommandBufferAllocateInfo::default()
-                .command_pool(command_pool.raw).level(vk::CommandBufferLevel::PRIMARY).command_buffer_count(1))?[0];
-            let fence = Fence::from_raw(device, device.raw.create_fence(&vk::FenceCreateInfo::default(), None)?);
-            let queries = if device.info.timestamps {
-                Some(QueryPool::from_raw(device, device.raw.create_query_pool(
-                    &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(3), None)?))
-            } else {
-                None
-            };
-            (set_layout, layout, pool, set, command_pool, cmd, fence, queries)
-        };
-        let cull = compute_pipeline(device, &layout, CHAIN_CULL_SPV)?;
-        let draw = chain_pipeline(device, &layout)?;
+        let descriptors = Descriptors::new(device, &bound)?;
+        let commands = Commands::new(device, 3)?;
+        let cull = compute_pipeline(device, &descriptors.layout, CHAIN_CULL_SPV)?;
+        let draw = draw_pipeline(device, &descriptors.layout,
+            &[(vk::ShaderStageFlags::VERTEX, CHAIN_VERT_SPV), (vk::ShaderStageFlags::FRAGMENT, DRAW_FRAG_SPV)], false)?;
         let index_handle = indices.raw;
         let renderer = ChainRenderer {
             device: device.clone(),
@@ -154,25 +95,12 @@ impl ChainRenderer {
             draws_readback,
             indices: index_handle,
             target: None,
-            _set_layout: set_layout,
-            layout,
-            _pool: pool,
-            set,
+            descriptors,
             cull,
             draw,
-            _command_pool: command_pool,
-            cmd,
-            fence,
-            queries,
+            commands,
         };
-        if !uploads.is_empty() {
-            renderer.submit(|dev, cmd| {
-                for (staging, dst) in &uploads {
-                    // SAFETY: both buffers live and large enough; recording in `cmd`.
-                    unsafe { dev.cmd_copy_buffer(cmd, staging.raw, *dst, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: staging.size }]) };
-                }
-            })?;
-        }
+        renderer.commands.upload(&uploads)?;
         Ok(renderer)
     }
 
@@ -199,25 +127,20 @@ impl ChainRenderer {
             .flat_map(|(l, c)| [c[0], 0, c[2], 0, l as u32 * self.instance_count])
             .collect();
         let groups = self.instance_count.div_ceil(64);
-        self.submit(|dev, cmd| {
+        self.commands.submit(|dev, cmd| {
             // SAFETY: recording into `cmd` with resources owned by `self`.
             unsafe {
-                if let Some(q) = &self.queries {
-                    dev.cmd_reset_query_pool(cmd, q.raw, 0, 3);
-                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::TOP_OF_PIPE, q.raw, 0);
-                }
+                self.commands.start_timestamps(dev, cmd);
                 dev.cmd_update_buffer(cmd, self.draws.raw, 0, cast_slice(&reset));
                 barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
                     vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE);
                 dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.cull.raw);
-                dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout.raw, 0, &[self.set], &[]);
+                dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.descriptors.layout.raw, 0, &[self.descriptors.set], &[]);
                 dev.cmd_dispatch(cmd, groups.min(65535), groups.div_ceil(65535), 1);
                 barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
                     vk::PipelineStageFlags2::DRAW_INDIRECT | vk::PipelineStageFlags2::VERTEX_SHADER,
                     vk::AccessFlags2::INDIRECT_COMMAND_READ | vk::AccessFlags2::SHADER_READ);
-                if let Some(q) = &self.queries {
-                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 1);
-                }
+                self.commands.timestamp(dev, cmd, 1);
                 let barriers = [
                     vk::ImageMemoryBarrier2::default()
                         .src_stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)
@@ -256,15 +179,13 @@ impl ChainRenderer {
                     height: -(height as f32), min_depth: 0.0, max_depth: 1.0 }]);
                 dev.cmd_set_scissor(cmd, 0, &[area]);
                 dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.draw.raw);
-                dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.layout.raw, 0, &[self.set], &[]);
+                dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.descriptors.layout.raw, 0, &[self.descriptors.set], &[]);
                 dev.cmd_bind_index_buffer(cmd, self.indices, 0, vk::IndexType::UINT32);
                 for l in 0..self.levels.len() as u64 {
                     dev.cmd_draw_indexed_indirect(cmd, self.draws.raw, l * 20, 1, 20);
                 }
                 dev.cmd_end_rendering(cmd);
-                if let Some(q) = &self.queries {
-                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 2);
-                }
+                self.commands.timestamp(dev, cmd, 2);
                 barrier(dev, cmd, vk::PipelineStageFlags2::DRAW_INDIRECT, vk::AccessFlags2::INDIRECT_COMMAND_READ,
                     vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_READ);
                 dev.cmd_copy_buffer(cmd, self.draws.raw, self.draws_readback.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: self.draws.size }]);
@@ -275,79 +196,7 @@ impl ChainRenderer {
         let draws: Vec<u32> = cast_slice::<u8, u32>(&self.draws_readback.read(self.levels.len() * 20)?).to_vec();
         let instances_per_level: Vec<u32> = draws.chunks(5).map(|c| c[1]).collect();
         let triangles = instances_per_level.iter().zip(&self.levels).map(|(&n, &(_, count))| n as u64 * count as u64 / 3).sum();
-        let times = match &self.queries {
-            Some(q) => {
-                let mut ticks = [0u64; 3];
-                // SAFETY: written by the submission just waited for.
-                unsafe { self.device.raw.get_query_pool_results(q.raw, 0, &mut ticks, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT) }?;
-                let ms = |a: usize, b: usize| ticks[b].wrapping_sub(ticks[a]) as f64 * self.device.info.timestamp_period_ns as f64 * 1e-6;
-                Some((ms(0, 1), ms(1, 2)))
-            }
-            None => None,
-        };
+        let times = self.commands.read_intervals_ms()?.map(|ms| (ms[0], ms[1]));
         Ok(ChainFrame { instances_per_level, triangles, times })
-    }
-
-    fn submit(&self, record: impl FnOnce(&ash::Device, vk::CommandBuffer)) -> Result<()> {
-        let dev = &self.device.raw;
-        // SAFETY: as Renderer::submit: the command buffer is idle and the fence unsignalled.
-        unsafe {
-            dev.reset_command_buffer(self.cmd, vk::CommandBufferResetFlags::empty())?;
-            dev.begin_command_buffer(self.cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
-            record(dev, self.cmd);
-            dev.end_command_buffer(self.cmd)?;
-            let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cmd)];
-            let submit = [vk::SubmitInfo2::default().command_buffer_infos(&cmds)];
-            dev.queue_submit2(self.device.queue, &submit, self.fence.raw).context("vkQueueSubmit2")?;
-            dev.wait_for_fences(&[self.fence.raw], true, u64::MAX).context("vkWaitForFences")?;
-            dev.reset_fences(&[self.fence.raw])?;
-        }
-        Ok(())
-    }
-}
-
-fn chain_pipeline(device: &Arc<Device>, layout: &PipelineLayout) -> Result<Pipeline> {
-    let vert = ShaderModule::new(device, CHAIN_VERT_SPV)?;
-    let frag = ShaderModule::new(device, DRAW_FRAG_SPV)?;
-    let stages = [
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert.raw).name(c"main"),
-        vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag.raw).name(c"main"),
-    ];
-    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
-    let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_LIST);
-    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
-    let raster = vk::PipelineRasterizationStateCreateInfo::default()
-        .polygon_mode(vk::PolygonMode::FILL)
-        .cull_mode(vk::CullModeFlags::BACK)
-        .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
-        .line_width(1.0);
-    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
-    let depth = vk::PipelineDepthStencilStateCreateInfo::default()
-        .depth_test_enable(true)
-        .depth_write_enable(true)
-        .depth_compare_op(vk::CompareOp::GREATER);
-    let blend_attachments = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
-    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
-    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
-    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
-    let color_formats = [COLOR_FORMAT];
-    let mut rendering = vk::PipelineRenderingCreateInfo::default().color_attachment_formats(&color_formats).depth_attachment_format(DEPTH_FORMAT);
-    let info = [vk::GraphicsPipelineCreateInfo::default()
-        .stages(&stages)
-        .vertex_input_state(&vertex_input)
-        .input_assembly_state(&assembly)
-        .viewport_state(&viewport)
-        .rasterization_state(&raster)
-        .multisample_state(&multisample)
-        .depth_stencil_state(&depth)
-        .color_blend_state(&blend)
-        .dynamic_state(&dynamic)
-        .layout(layout.raw)
-        .push_next(&mut rendering)];
-    // SAFETY: valid state structs and modules, alive until the call returns.
-    unsafe {
-        let raw = device.raw.create_graphics_pipelines(vk::PipelineCache::null(), &info, None).map_err(|(_, e)| e)
-            .context("vkCreateGraphicsPipelines")?[0];
-        Ok(Pipeline::from_raw(device, raw))
     }
 }

@@ -5,6 +5,7 @@
 
 mod chain;
 mod context;
+mod pipelines;
 mod renderer;
 mod resources;
 mod swapchain;

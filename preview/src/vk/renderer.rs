@@ -10,10 +10,8 @@ use bytemuck::{bytes_of, cast_slice};
 
 use super::context::Device;
 use super::swapchain::{AcquiredImage, Swapchain};
-use super::resources::{
-    subresource_range, Buffer, CommandPool, DescriptorPool, DescriptorSetLayout, Fence, Image, Location, Pipeline,
-    PipelineLayout, QueryPool, ShaderModule,
-};
+use super::pipelines::{compute_pipeline, draw_pipeline, Commands, Descriptors};
+use super::resources::{subresource_range, Buffer, Image, Location, Pipeline};
 use crate::gpu_types::{
     GpuCounters, GpuView, DISPATCH_ARGS_OFFSET, DRAW_ARGS_OFFSET, MESH_ARGS_OFFSET, SELECT_ARGS_OFFSET,
 };
@@ -155,10 +153,7 @@ pub struct Renderer {
     target: Option<RenderTarget>,
     /// Host copy of a presented swapchain image (screenshots from the window).
     present_readback: Option<Buffer>,
-    _set_layout: DescriptorSetLayout,
-    pipeline_layout: PipelineLayout,
-    _descriptor_pool: DescriptorPool,
-    set: vk::DescriptorSet,
+    descriptors: Descriptors,
     cull: Pipeline,
     select: Pipeline,
     expand: Pipeline,
@@ -166,10 +161,7 @@ pub struct Renderer {
     draw_back: Pipeline,
     mesh_front: Option<Pipeline>,
     mesh_back: Option<Pipeline>,
-    _command_pool: CommandPool,
-    cmd: vk::CommandBuffer,
-    fence: Fence,
-    queries: Option<QueryPool>,
+    commands: Commands,
 }
 
 impl Drop for Renderer {
@@ -262,106 +254,26 @@ impl Renderer {
         // order (storage); the same for every pipeline (shaders/common.glsl and each stage).
         let storage =
             [&clusters, &page_bases, &pages, &counters, &visible, &indices, &projected, &instance_buffer, &bins, &work, &level_order];
-        let mut bindings = vec![vk::DescriptorSetLayoutBinding::default()
-            .binding(0)
-            .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
-            .descriptor_count(1)
-            .stage_flags(vk::ShaderStageFlags::ALL)];
-        for b in 1..=storage.len() as u32 {
-            bindings.push(
-                vk::DescriptorSetLayoutBinding::default()
-                    .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .descriptor_count(1)
-                    .stage_flags(vk::ShaderStageFlags::ALL),
-            );
-        }
-        // SAFETY: object creation from valid create infos; each handle goes straight into its
-        // owner. Descriptor writes reference live buffers owned by the returned Renderer.
-        let (set_layout, pipeline_layout, descriptor_pool, set, command_pool, cmd, fence, queries) = unsafe {
-            let set_layout = DescriptorSetLayout::from_raw(
-                device,
-                device.raw.create_descriptor_set_layout(
-                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
-                    None,
-                )?,
-            );
-            let layouts = [set_layout.raw];
-            let pipeline_layout = PipelineLayout::from_raw(
-                device,
-                device.raw.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&layouts), None)?,
-            );
-            let sizes = [
-                vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: 1 },
-                vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: storage.len() as u32 },
-            ];
-            let descriptor_pool = DescriptorPool::from_raw(
-                device,
-                device
-                    .raw
-                    .create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)?,
-            );
-            let set = device.raw.allocate_descriptor_sets(
-                &vk::DescriptorSetAllocateInfo::default().descriptor_pool(descriptor_pool.raw).set_layouts(&layouts),
-            )?[0];
-            let infos: Vec<[vk::DescriptorBufferInfo; 1]> = std::iter::once(&view)
-                .chain(storage.iter().copied())
-                .map(|b| [vk::DescriptorBufferInfo { buffer: b.raw, offset: 0, range: vk::WHOLE_SIZE }])
-                .collect();
-            let writes: Vec<vk::WriteDescriptorSet> = infos
-                .iter()
-                .enumerate()
-                .map(|(i, info)| {
-                    vk::WriteDescriptorSet::default()
-                        .dst_set(set)
-                        .dst_binding(i as u32)
-                        .descriptor_type(if i == 0 {
-                            vk::DescriptorType::UNIFORM_BUFFER
-                        } else {
-                            vk::DescriptorType::STORAGE_BUFFER
-                        })
-                        .buffer_info(info)
-                })
-                .collect();
-            device.raw.update_descriptor_sets(&writes, &[]);
-            let command_pool = CommandPool::from_raw(
-                device,
-                device.raw.create_command_pool(
-                    &vk::CommandPoolCreateInfo::default()
-                        .queue_family_index(device.queue_family)
-                        .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER),
-                    None,
-                )?,
-            );
-            let cmd = device.raw.allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(command_pool.raw)
-                    .level(vk::CommandBufferLevel::PRIMARY)
-                    .command_buffer_count(1),
-            )?[0];
-            let fence = Fence::from_raw(device, device.raw.create_fence(&vk::FenceCreateInfo::default(), None)?);
-            let queries = if device.info.timestamps {
-                Some(QueryPool::from_raw(
-                    device,
-                    device.raw.create_query_pool(
-                        &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(TIMESTAMPS),
-                        None,
-                    )?,
-                ))
-            } else {
-                None
-            };
-            (set_layout, pipeline_layout, descriptor_pool, set, command_pool, cmd, fence, queries)
-        };
+        let bound: Vec<(u32, &Buffer)> = std::iter::once(&view).chain(storage).enumerate().map(|(i, b)| (i as u32, b)).collect();
+        let descriptors = Descriptors::new(device, &bound)?;
+        let commands = Commands::new(device, TIMESTAMPS)?;
 
-        let cull = compute_pipeline(device, &pipeline_layout, CULL_SPV)?;
+        let pipeline_layout = &descriptors.layout;
+        let cull = compute_pipeline(device, pipeline_layout, CULL_SPV)?;
         let select =
-            compute_pipeline(device, &pipeline_layout, if options.naive_arithmetic { SELECT_NAIVE_SPV } else { SELECT_SPV })?;
-        let expand = compute_pipeline(device, &pipeline_layout, EXPAND_SPV)?;
-        let draw_front = draw_pipeline(device, &pipeline_layout, false, false)?;
-        let draw_back = draw_pipeline(device, &pipeline_layout, true, false)?;
+            compute_pipeline(device, pipeline_layout, if options.naive_arithmetic { SELECT_NAIVE_SPV } else { SELECT_SPV })?;
+        let expand = compute_pipeline(device, pipeline_layout, EXPAND_SPV)?;
+        // The fallback: no vertex input, the vertex shader decodes positions from the pages.
+        let vertex_stages = [(vk::ShaderStageFlags::VERTEX, DRAW_VERT_SPV), (vk::ShaderStageFlags::FRAGMENT, DRAW_FRAG_SPV)];
+        let draw_front = draw_pipeline(device, pipeline_layout, &vertex_stages, false)?;
+        let draw_back = draw_pipeline(device, pipeline_layout, &vertex_stages, true)?;
+        let mesh_stages = [
+            (vk::ShaderStageFlags::TASK_EXT, DRAW_TASK_SPV),
+            (vk::ShaderStageFlags::MESH_EXT, DRAW_MESH_SPV),
+            (vk::ShaderStageFlags::FRAGMENT, DRAW_FRAG_SPV),
+        ];
         let (mesh_front, mesh_back) = if mesh_path {
-            (Some(draw_pipeline(device, &pipeline_layout, false, true)?), Some(draw_pipeline(device, &pipeline_layout, true, true)?))
+            (Some(draw_pipeline(device, pipeline_layout, &mesh_stages, false)?), Some(draw_pipeline(device, pipeline_layout, &mesh_stages, true)?))
         } else {
             (None, None)
         };
@@ -394,10 +306,7 @@ impl Renderer {
             readback_projected,
             target: None,
             present_readback: None,
-            _set_layout: set_layout,
-            pipeline_layout,
-            _descriptor_pool: descriptor_pool,
-            set,
+            descriptors,
             cull,
             select,
             expand,
@@ -405,21 +314,10 @@ impl Renderer {
             draw_back,
             mesh_front,
             mesh_back,
-            _command_pool: command_pool,
-            cmd,
-            fence,
-            queries,
+            commands,
         };
         // Copy the staged data into the device-local buffers.
-        if !uploads.is_empty() {
-            renderer.submit(|dev, cmd| {
-                for (staging, dst) in &uploads {
-                    let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: staging.size }];
-                    // SAFETY: both buffers are live and large enough; recording in `cmd`.
-                    unsafe { dev.cmd_copy_buffer(cmd, staging.raw, *dst, &region) };
-                }
-            })?;
-        }
+        renderer.commands.upload(&uploads)?;
         drop(uploads);
         Ok(renderer)
     }
@@ -449,7 +347,7 @@ impl Renderer {
         let view = self.prepare_view(view)?;
         let want_projected = view.flags & crate::gpu_types::FLAG_WRITE_PROJECTED != 0;
         let n = self.cluster_count.max(1) as u64;
-        self.submit(|dev, cmd| {
+        self.commands.submit(|dev, cmd| {
             // SAFETY: recording into `cmd` with buffers owned by `self`.
             unsafe {
                 self.record_select(dev, cmd);
@@ -537,21 +435,16 @@ impl Renderer {
             .map(|p| vk::SemaphoreSubmitInfo::default().semaphore(p.image.rendered).stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS))
             .into_iter()
             .collect();
-        self.submit_with(&waits, &signals, |dev, cmd| {
+        self.commands.submit_with(&waits, &signals, |dev, cmd| {
             // SAFETY: recording into `cmd` with resources owned by `self`; layouts are
             // transitioned from UNDEFINED each frame (contents are cleared anyway).
             unsafe {
-                if let Some(q) = &self.queries {
-                    dev.cmd_reset_query_pool(cmd, q.raw, 0, TIMESTAMPS);
-                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::TOP_OF_PIPE, q.raw, 0);
-                }
+                self.commands.start_timestamps(dev, cmd);
                 self.record_select(dev, cmd);
                 barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
                     vk::PipelineStageFlags2::COMPUTE_SHADER | vk::PipelineStageFlags2::DRAW_INDIRECT,
                     vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE | vk::AccessFlags2::INDIRECT_COMMAND_READ);
-                if let Some(q) = &self.queries {
-                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 1);
-                }
+                self.commands.timestamp(dev, cmd, 1);
                 if self.mesh_path {
                     barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
                         vk::PipelineStageFlags2::DRAW_INDIRECT | vk::PipelineStageFlags2::TASK_SHADER_EXT
@@ -565,9 +458,7 @@ impl Renderer {
                             | vk::PipelineStageFlags2::VERTEX_SHADER | vk::PipelineStageFlags2::FRAGMENT_SHADER,
                         vk::AccessFlags2::INDIRECT_COMMAND_READ | vk::AccessFlags2::INDEX_READ | vk::AccessFlags2::SHADER_READ);
                 }
-                if let Some(q) = &self.queries {
-                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 2);
-                }
+                self.commands.timestamp(dev, cmd, 2);
                 let to_attachment = [
                     image_barrier(&target.color, vk::ImageAspectFlags::COLOR,
                         vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT, vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
@@ -610,7 +501,7 @@ impl Renderer {
                     (Some(front), Some(back), Some(mesh)) if self.mesh_path => {
                         for pipeline in [front, back] {
                             dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
-                            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout.raw, 0, &[self.set], &[]);
+                            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.descriptors.layout.raw, 0, &[self.descriptors.set], &[]);
                             mesh.cmd_draw_mesh_tasks_indirect(cmd, self.counters.raw, MESH_ARGS_OFFSET, 1, 12);
                         }
                     }
@@ -618,15 +509,13 @@ impl Renderer {
                         dev.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT32);
                         for pipeline in [&self.draw_front, &self.draw_back] {
                             dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
-                            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline_layout.raw, 0, &[self.set], &[]);
+                            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.descriptors.layout.raw, 0, &[self.descriptors.set], &[]);
                             dev.cmd_draw_indexed_indirect(cmd, self.counters.raw, DRAW_ARGS_OFFSET, 1, 20);
                         }
                     }
                 }
                 dev.cmd_end_rendering(cmd);
-                if let Some(q) = &self.queries {
-                    dev.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, q.raw, 3);
-                }
+                self.commands.timestamp(dev, cmd, 3);
                 let to_copy = [vk::ImageMemoryBarrier2::default()
                     .src_stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)
                     .src_access_mask(vk::AccessFlags2::COLOR_ATTACHMENT_WRITE)
@@ -724,12 +613,7 @@ impl Renderer {
     }
 
     fn read_times(&self) -> Result<Option<PassTimes>> {
-        let Some(q) = &self.queries else { return Ok(None) };
-        let mut ticks = [0u64; TIMESTAMPS as usize];
-        // SAFETY: the queries were written by the submission this call follows (fence waited).
-        unsafe { self.device.raw.get_query_pool_results(q.raw, 0, &mut ticks, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT) }?;
-        let ms = |a: usize, b: usize| ticks[b].wrapping_sub(ticks[a]) as f64 * self.device.info.timestamp_period_ns as f64 * 1e-6;
-        Ok(Some(PassTimes { select_ms: ms(0, 1), expand_ms: ms(1, 2), draw_ms: ms(2, 3) }))
+        Ok(self.commands.read_intervals_ms()?.map(|ms| PassTimes { select_ms: ms[0], expand_ms: ms[1], draw_ms: ms[2] }))
     }
 
     fn ensure_target(&mut self, width: u32, height: u32) -> Result<()> {
@@ -842,7 +726,7 @@ impl Renderer {
             barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
                 vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE);
             dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.cull.raw);
-            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline_layout.raw, 0, &[self.set], &[]);
+            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.descriptors.layout.raw, 0, &[self.descriptors.set], &[]);
             dev.cmd_dispatch(cmd, gx, gy, 1);
             barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
                 vk::PipelineStageFlags2::COMPUTE_SHADER | vk::PipelineStageFlags2::DRAW_INDIRECT,
@@ -850,38 +734,6 @@ impl Renderer {
             dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.select.raw);
             dev.cmd_dispatch_indirect(cmd, self.counters.raw, SELECT_ARGS_OFFSET);
         }
-    }
-
-    /// Records `record` into the command buffer, submits it and waits for it to finish.
-    fn submit(&self, record: impl FnOnce(&ash::Device, vk::CommandBuffer)) -> Result<()> {
-        self.submit_with(&[], &[], record)
-    }
-
-    /// [`Renderer::submit`], waiting on and signalling the given semaphores.
-    fn submit_with(
-        &self,
-        waits: &[vk::SemaphoreSubmitInfo],
-        signals: &[vk::SemaphoreSubmitInfo],
-        record: impl FnOnce(&ash::Device, vk::CommandBuffer),
-    ) -> Result<()> {
-        let dev = &self.device.raw;
-        // SAFETY: the command buffer is not in use (every submission is waited for before
-        // this returns); the fence is unsignalled (reset after each wait).
-        unsafe {
-            dev.reset_command_buffer(self.cmd, vk::CommandBufferResetFlags::empty())?;
-            dev.begin_command_buffer(self.cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
-            record(dev, self.cmd);
-            dev.end_command_buffer(self.cmd)?;
-            let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cmd)];
-            let submit = [vk::SubmitInfo2::default()
-                .wait_semaphore_infos(waits)
-                .command_buffer_infos(&cmds)
-                .signal_semaphore_infos(signals)];
-            dev.queue_submit2(self.device.queue, &submit, self.fence.raw).context("vkQueueSubmit2")?;
-            dev.wait_for_fences(&[self.fence.raw], true, u64::MAX).context("vkWaitForFences")?;
-            dev.reset_fences(&[self.fence.raw])?;
-        }
-        Ok(())
     }
 }
 
@@ -943,83 +795,4 @@ pub(crate) fn gpu_buffer(
         uploads.push((staging, buffer.raw));
     }
     Ok(buffer)
-}
-
-pub(crate) fn compute_pipeline(device: &Arc<Device>, layout: &PipelineLayout, spirv: &[u8]) -> Result<Pipeline> {
-    let module = ShaderModule::new(device, spirv)?;
-    let stage = vk::PipelineShaderStageCreateInfo::default()
-        .stage(vk::ShaderStageFlags::COMPUTE)
-        .module(module.raw)
-        .name(c"main");
-    let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout.raw)];
-    // SAFETY: valid module and layout; the pipeline goes into its owner.
-    unsafe {
-        let raw = device
-            .raw
-            .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
-            .map_err(|(_, e)| e)
-            .context("vkCreateComputePipelines")?[0];
-        Ok(Pipeline::from_raw(device, raw))
-    }
-}
-
-/// A draw pipeline: the fallback (no vertex input: the vertex shader decodes positions from
-/// the pages) or, with `mesh`, task + mesh shaders; reverse-Z depth test. `back_faces` draws only back faces, pushed slightly away (depth bias)
-/// so that front faces win every tie along silhouettes; otherwise only front faces.
-fn draw_pipeline(device: &Arc<Device>, layout: &PipelineLayout, back_faces: bool, mesh: bool) -> Result<Pipeline> {
-    let frag = ShaderModule::new(device, DRAW_FRAG_SPV)?;
-    let modules = if mesh {
-        vec![(vk::ShaderStageFlags::TASK_EXT, ShaderModule::new(device, DRAW_TASK_SPV)?), (vk::ShaderStageFlags::MESH_EXT, ShaderModule::new(device, DRAW_MESH_SPV)?)]
-    } else {
-        vec![(vk::ShaderStageFlags::VERTEX, ShaderModule::new(device, DRAW_VERT_SPV)?)]
-    };
-    let mut stages: Vec<vk::PipelineShaderStageCreateInfo> =
-        modules.iter().map(|(stage, m)| vk::PipelineShaderStageCreateInfo::default().stage(*stage).module(m.raw).name(c"main")).collect();
-    stages.push(vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag.raw).name(c"main"));
-    let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
-    let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_LIST);
-    let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
-    let raster = vk::PipelineRasterizationStateCreateInfo::default()
-        .polygon_mode(vk::PolygonMode::FILL)
-        .cull_mode(if back_faces { vk::CullModeFlags::FRONT } else { vk::CullModeFlags::BACK })
-        .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
-        .depth_bias_enable(back_faces)
-        .depth_bias_constant_factor(if back_faces { -16.0 } else { 0.0 })
-        .depth_bias_slope_factor(if back_faces { -2.0 } else { 0.0 })
-        .line_width(1.0);
-    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
-    let depth = vk::PipelineDepthStencilStateCreateInfo::default()
-        .depth_test_enable(true)
-        .depth_write_enable(true)
-        .depth_compare_op(vk::CompareOp::GREATER);
-    let blend_attachments = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
-    let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
-    let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
-    let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
-    let color_formats = [COLOR_FORMAT];
-    let mut rendering = vk::PipelineRenderingCreateInfo::default()
-        .color_attachment_formats(&color_formats)
-        .depth_attachment_format(DEPTH_FORMAT);
-    let mut info = vk::GraphicsPipelineCreateInfo::default().stages(&stages);
-    if !mesh {
-        info = info.vertex_input_state(&vertex_input).input_assembly_state(&assembly);
-    }
-    let info = [info
-        .viewport_state(&viewport)
-        .rasterization_state(&raster)
-        .multisample_state(&multisample)
-        .depth_stencil_state(&depth)
-        .color_blend_state(&blend)
-        .dynamic_state(&dynamic)
-        .layout(layout.raw)
-        .push_next(&mut rendering)];
-    // SAFETY: valid state structs and modules (alive until the call returns).
-    unsafe {
-        let raw = device
-            .raw
-            .create_graphics_pipelines(vk::PipelineCache::null(), &info, None)
-            .map_err(|(_, e)| e)
-            .context("vkCreateGraphicsPipelines")?[0];
-        Ok(Pipeline::from_raw(device, raw))
-    }
 }
