@@ -36,24 +36,26 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
 }
 
 /// [`write_mres`] for clusters already encoded with [`EncodedCluster::new`] (a large bake
-/// keeps its finished clusters in this compact form). Consumes them, so that their memory is
-/// freed as the pages are built.
+/// keeps its finished clusters in this compact form). Consumes them: the hierarchy and page
+/// table are laid out first (their sizes do not depend on compression), then pages are
+/// compressed a batch at a time straight into the file, and each batch's clusters are freed,
+/// so that the encoded clusters and the file are never both held whole.
 pub fn write_encoded(
     header: &Header,
     groups: &[Group],
-    encoded: Vec<EncodedCluster>,
+    mut encoded: Vec<EncodedCluster>,
     level: i32,
 ) -> Result<Vec<u8>, WriteError> {
     let layout = Layout::new(groups, &encoded)?;
-    let pages = pack_pages(&layout, &encoded, level)?;
+    let pages = page_spans(&layout, &encoded);
 
-    // Renumbered hierarchy.
+    // Renumbered hierarchy. A cluster's header sits at its index in its page × header size.
     let mut new_groups = Vec::with_capacity(groups.len());
     let mut clusters = Vec::with_capacity(encoded.len());
     let mut page_offsets = vec![0u32; encoded.len()];
     for page in &pages {
-        for (c, offset) in page.cluster_offsets.iter().enumerate() {
-            page_offsets[page.first_cluster as usize + c] = *offset;
+        for c in 0..page.cluster_count {
+            page_offsets[(page.first_cluster + c) as usize] = c * CLUSTER_HEADER_SIZE as u32;
         }
     }
     for (new_g, &old_g) in layout.group_order.iter().enumerate() {
@@ -76,7 +78,6 @@ pub fn write_encoded(
             page_offset: page_offsets[new_c],
         });
     }
-    drop(encoded);
     let groups = new_groups;
     let dependencies = page_dependencies(&pages, &groups, &clusters);
 
@@ -95,27 +96,49 @@ pub fn write_encoded(
         hierarchy.extend_from_slice(&c.triangle_count.to_le_bytes());
         hierarchy.extend_from_slice(&c.page_offset.to_le_bytes());
     }
-
     let hierarchy_offset = HEADER_SIZE as u64;
     let page_table_offset = hierarchy_offset + hierarchy.len() as u64;
     let dep_total: usize = dependencies.iter().map(Vec::len).sum();
     let page_table_size = (pages.len() * PAGE_RECORD_SIZE + dep_total * 4) as u64;
-    let mut offset = page_table_offset + page_table_size;
-    let mut table = Vec::new();
+
+    // The pages, straight into the file after room for the header, hierarchy and table.
+    let mut out = vec![0u8; (page_table_offset + page_table_size) as usize];
+    let mut frames: Vec<(u64, u32, [u8; 32])> = Vec::with_capacity(pages.len());
+    for batch in pages.chunks(PAGE_BATCH) {
+        let compressed: Vec<Vec<u8>> = batch
+            .par_iter()
+            .map(|page| {
+                let members = &layout.cluster_order[page.first_cluster as usize..][..page.cluster_count as usize];
+                let members: Vec<&EncodedCluster> = members.iter().map(|&c| &encoded[c]).collect();
+                compress_page(&members, level)
+            })
+            .collect::<Result<_, _>>()?;
+        for frame in compressed {
+            frames.push((out.len() as u64, frame.len() as u32, *blake3::hash(&frame).as_bytes()));
+            out.extend_from_slice(&frame);
+        }
+        for page in batch {
+            for &c in &layout.cluster_order[page.first_cluster as usize..][..page.cluster_count as usize] {
+                encoded[c].data = Box::default();
+            }
+        }
+        release_freed_memory();
+    }
+    drop(encoded);
+
+    let mut table = Vec::with_capacity(page_table_size as usize);
     let mut dep_first = 0u32;
-    for (page, deps) in pages.iter().zip(&dependencies) {
-        let frame = &page.frame;
+    for ((page, deps), (offset, length, checksum)) in pages.iter().zip(&dependencies).zip(&frames) {
         table.extend_from_slice(&offset.to_le_bytes());
-        table.extend_from_slice(&(frame.len() as u32).to_le_bytes());
+        table.extend_from_slice(&length.to_le_bytes());
         table.extend_from_slice(&(page.raw_size as u32).to_le_bytes());
-        table.extend_from_slice(blake3::hash(frame).as_bytes());
+        table.extend_from_slice(checksum);
         for v in
             [page.first_cluster, page.cluster_count, page.first_group, page.group_count, dep_first, deps.len() as u32]
         {
             table.extend_from_slice(&v.to_le_bytes());
         }
         dep_first += deps.len() as u32;
-        offset += frame.len() as u64;
     }
     for d in dependencies.iter().flatten() {
         table.extend_from_slice(&d.to_le_bytes());
@@ -123,34 +146,45 @@ pub fn write_encoded(
 
     let level_count = groups.iter().map(|g| g.level + 1).max().unwrap_or(0);
     let h = header;
-    let mut out = Vec::with_capacity(offset as usize);
-    out.extend_from_slice(&MAGIC);
+    let mut head = Vec::with_capacity(HEADER_SIZE);
+    head.extend_from_slice(&MAGIC);
     for v in [VERSION, HEADER_SIZE as u32, h.flags] {
-        out.extend_from_slice(&v.to_le_bytes());
+        head.extend_from_slice(&v.to_le_bytes());
     }
-    put_f32s(&mut out, &h.grid.origin);
-    put_f32s(&mut out, &[h.grid.step]);
-    put_f32s(&mut out, &h.uv.min);
-    put_f32s(&mut out, &h.uv.extent);
+    put_f32s(&mut head, &h.grid.origin);
+    put_f32s(&mut head, &[h.grid.step]);
+    put_f32s(&mut head, &h.uv.min);
+    put_f32s(&mut head, &h.uv.extent);
     for v in
         [h.normal_bits, h.position_bits, level_count, groups.len() as u32, clusters.len() as u32, pages.len() as u32]
     {
-        out.extend_from_slice(&v.to_le_bytes());
+        head.extend_from_slice(&v.to_le_bytes());
     }
     for v in [h.source_triangles, hierarchy_offset, hierarchy.len() as u64, page_table_offset, page_table_size] {
-        out.extend_from_slice(&v.to_le_bytes());
+        head.extend_from_slice(&v.to_le_bytes());
     }
-    debug_assert_eq!(out.len(), 112);
-    let checksum = meta_checksum(&out, &hierarchy, &table);
-    out.extend_from_slice(&checksum);
-    out.resize(HEADER_SIZE, 0);
-    out.extend_from_slice(&hierarchy);
-    out.extend_from_slice(&table);
-    // Each page's frame is freed once copied: the frames and the file are not both held whole.
-    for page in pages {
-        out.extend_from_slice(&page.frame);
-    }
+    debug_assert_eq!(head.len(), 112);
+    let checksum = meta_checksum(&head, &hierarchy, &table);
+    head.extend_from_slice(&checksum);
+    out[..head.len()].copy_from_slice(&head);
+    out[HEADER_SIZE..][..hierarchy.len()].copy_from_slice(&hierarchy);
+    out[page_table_offset as usize..][..table.len()].copy_from_slice(&table);
     Ok(out)
+}
+
+/// Pages compressed at a time: enough for every thread, few enough that the batch's frames
+/// and raw pages stay small.
+const PAGE_BATCH: usize = 64;
+
+/// Gives freed heap memory back to the system. The freed clusters are many small blocks that
+/// glibc keeps for reuse, while the file grows in one large block it cannot reuse them for: so
+/// without this, peak memory would be the encoded clusters plus the whole file.
+fn release_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only returns free memory to the system; it has no preconditions.
+    unsafe {
+        libc::malloc_trim(0);
+    }
 }
 
 /// blake3 over the first 112 header bytes, the hierarchy section and the page table.
@@ -208,7 +242,7 @@ impl Layout {
         Ok(Layout { group_order, group_new, cluster_order, group_ranges })
     }
 
-    fn group_page(&self, pages: &[PageBuild], new_g: usize) -> u32 {
+    fn group_page(&self, pages: &[PageSpan], new_g: usize) -> u32 {
         let g = new_g as u32;
         pages.partition_point(|p| p.first_group + p.group_count <= g) as u32
     }
@@ -219,7 +253,8 @@ impl Layout {
 /// the well-compressing indices share tables with the near-random bit-packed positions.
 /// The bit-packed positions and normals (sections 1 and 2) are near-random: they get zstd's
 /// fastest level, which compresses them as well as level 19 does.
-fn compress_page(raw: &[u8], sections: &[usize], level: i32) -> std::io::Result<Vec<u8>> {
+fn compress_page(clusters: &[&EncodedCluster], level: i32) -> std::io::Result<Vec<u8>> {
+    let (raw, sections) = assemble_page(clusters);
     let mut out = Vec::new();
     for (section, w) in sections.windows(2).enumerate() {
         if w[1] > w[0] {
@@ -230,68 +265,53 @@ fn compress_page(raw: &[u8], sections: &[usize], level: i32) -> std::io::Result<
     Ok(out)
 }
 
-/// One page: its compressed frame and where it sits in the hierarchy.
-struct PageBuild {
-    /// The page's zstd frames (one per section).
-    frame: Vec<u8>,
-    /// Length of the decompressed page.
-    raw_size: usize,
+/// One page's place: its clusters and groups (in the new order) and its decompressed size.
+struct PageSpan {
     first_cluster: u32,
     cluster_count: u32,
     first_group: u32,
     group_count: u32,
-    /// Offset of each cluster's header within the decompressed page.
-    cluster_offsets: Vec<u32>,
+    raw_size: usize,
 }
 
 /// Greedily fills pages with whole groups in coarse-to-fine order.
-/// Each page is assembled and compressed on one thread and only its frame is kept.
-fn pack_pages(layout: &Layout, encoded: &[EncodedCluster], level: i32) -> std::io::Result<Vec<PageBuild>> {
-    // Page boundaries first (cheap, sequential), then the pages themselves in parallel.
+fn page_spans(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageSpan> {
+    let size = |g: usize| -> usize {
+        let (first, count) = layout.group_ranges[g];
+        (first..first + count).map(|c| encoded[layout.cluster_order[c as usize]].size()).sum()
+    };
     let mut spans = Vec::new();
     let mut start_group = 0usize;
     while start_group < layout.group_ranges.len() {
         let mut end_group = start_group;
-        let mut size = 0usize;
+        let mut raw_size = 0usize;
         while end_group < layout.group_ranges.len() {
-            let (first, count) = layout.group_ranges[end_group];
-            let group_size: usize =
-                (first..first + count).map(|c| encoded[layout.cluster_order[c as usize]].size()).sum();
-            if end_group > start_group && size + group_size > PAGE_TARGET_RAW_SIZE {
+            let group_size = size(end_group);
+            if end_group > start_group && raw_size + group_size > PAGE_TARGET_RAW_SIZE {
                 break;
             }
-            size += group_size;
+            raw_size += group_size;
             end_group += 1;
         }
-        spans.push((start_group, end_group));
+        let first_cluster = layout.group_ranges[start_group].0;
+        let (last_first, last_count) = layout.group_ranges[end_group - 1];
+        spans.push(PageSpan {
+            first_cluster,
+            cluster_count: last_first + last_count - first_cluster,
+            first_group: start_group as u32,
+            group_count: (end_group - start_group) as u32,
+            raw_size,
+        });
         start_group = end_group;
     }
     spans
-        .par_iter()
-        .map(|&(start_group, end_group)| {
-            let first_cluster = layout.group_ranges[start_group].0;
-            let (last_first, last_count) = layout.group_ranges[end_group - 1];
-            let cluster_count = last_first + last_count - first_cluster;
-            let clusters: Vec<&EncodedCluster> = layout.cluster_order
-                [first_cluster as usize..(first_cluster + cluster_count) as usize]
-                .iter()
-                .map(|&c| &encoded[c])
-                .collect();
-            assemble_page(&clusters, first_cluster, start_group as u32, (end_group - start_group) as u32, level)
-        })
-        .collect()
 }
 
 /// Lays out a page: all cluster headers first, then the data blocks grouped by kind (every
 /// cluster's positions, then every cluster's normals, UVs, indices, materials), so that zstd
 /// sees like data together. Header offsets are rebased from cluster-relative to page-relative.
-fn assemble_page(
-    clusters: &[&EncodedCluster],
-    first_cluster: u32,
-    first_group: u32,
-    group_count: u32,
-    level: i32,
-) -> std::io::Result<PageBuild> {
+/// Returns the page and its section boundaries (0, end of headers, end of each block kind).
+fn assemble_page(clusters: &[&EncodedCluster]) -> (Vec<u8>, Vec<usize>) {
     let mut raw = vec![0u8; clusters.len() * CLUSTER_HEADER_SIZE];
     let mut headers: Vec<[u8; CLUSTER_HEADER_SIZE]> = clusters.iter().map(|c| c.header).collect();
     let mut sections = vec![0, raw.len()];
@@ -306,21 +326,10 @@ fn assemble_page(
         }
         sections.push(raw.len());
     }
-    let mut cluster_offsets = Vec::with_capacity(clusters.len());
     for (i, header) in headers.iter().enumerate() {
-        let at = i * CLUSTER_HEADER_SIZE;
-        raw[at..at + CLUSTER_HEADER_SIZE].copy_from_slice(header);
-        cluster_offsets.push(at as u32);
+        raw[i * CLUSTER_HEADER_SIZE..][..CLUSTER_HEADER_SIZE].copy_from_slice(header);
     }
-    Ok(PageBuild {
-        frame: compress_page(&raw, &sections, level)?,
-        raw_size: raw.len(),
-        first_cluster,
-        cluster_count: clusters.len() as u32,
-        first_group,
-        group_count,
-        cluster_offsets,
-    })
+    (raw, sections)
 }
 
 /// Data block kinds, in page order: positions, normals, UVs, indices, materials.
@@ -464,7 +473,7 @@ fn words_to_bytes(words: &[u32]) -> Vec<u8> {
 
 /// Per page, the other pages it depends on: those holding its clusters' parents (the clusters
 /// produced by its groups) and those holding their siblings (produced by the same group).
-fn page_dependencies(pages: &[PageBuild], groups: &[Group], clusters: &[ClusterInfo]) -> Vec<Vec<u32>> {
+fn page_dependencies(pages: &[PageSpan], groups: &[Group], clusters: &[ClusterInfo]) -> Vec<Vec<u32>> {
     // Pages holding the output of each group.
     let mut output_pages: Vec<Vec<u32>> = vec![Vec::new(); groups.len()];
     for c in clusters {
