@@ -27,7 +27,7 @@ use serde_json::{json, Value};
 
 use crate::camera::{crack_eyes, selection_eyes, Camera};
 use crate::gpu_types::{FLAG_FRUSTUM_CULL, FLAG_WRITE_PROJECTED};
-use crate::image::{count_flagged, count_model, write_png};
+use crate::image::{count_flagged, count_model, write_png, FLAG_RGBA};
 use crate::scene::SceneData;
 use crate::vk::Renderer;
 
@@ -57,6 +57,9 @@ pub struct VerifyOptions {
     /// most 0.015% seen: Nefertiti, the hammer scan, a 0.5 M-triangle sphere) exceed even 4× by up
     /// to 50× (where is not yet investigated).
     pub depth_max_fraction: f64,
+    /// Test hook: extra `GpuView` flags for the crack renders at τ > 0 (e.g. `FLAG_DROP_SOME`
+    /// to make holes and see the test catch them).
+    pub crack_flags: u32,
 }
 
 impl Default for VerifyOptions {
@@ -73,6 +76,7 @@ impl Default for VerifyOptions {
             failure_dir: None,
             depth_error_factor: 4.0,
             depth_max_fraction: 1e-3,
+            crack_flags: 0,
         }
     }
 }
@@ -135,6 +139,9 @@ pub struct VerifyReport {
     pub crack_renders: usize,
     /// Most flagged (red, back-face) pixels in one render.
     pub max_flagged_pixels: u64,
+    /// Most flagged pixels in one render that lie beyond the depth tolerance of the
+    /// full-detail surface: holes (flagged pixels within it are folds within the error).
+    pub max_hole_pixels: u64,
     /// Renders with any flagged pixel.
     pub flagged_renders: usize,
     /// Fewest model pixels in one crack render (shows the model was in view).
@@ -165,13 +172,13 @@ impl VerifyReport {
 
 impl VerifyReport {
     /// Whether every check passed: identical selections, bit-identical projected errors, no
-    /// duplicate list entries, no flagged pixel, the model in view in every crack render
+    /// duplicate list entries, no hole pixel, the model in view in every crack render
     /// (validation messages are judged by the caller).
     pub fn passed(&self) -> bool {
         self.selection_mismatched_runs == 0
             && self.projected_differences == 0
             && self.duplicate_lists == 0
-            && self.max_flagged_pixels == 0
+            && self.max_hole_pixels == 0
             && (self.crack_renders == 0 || self.min_model_pixels > 0)
             && self.depth_violation_fraction() <= self.depth_max_fraction
     }
@@ -194,6 +201,7 @@ impl VerifyReport {
             "cracks": {
                 "renders": self.crack_renders,
                 "max_flagged_pixels": self.max_flagged_pixels,
+                "max_hole_pixels": self.max_hole_pixels,
                 "flagged_renders": self.flagged_renders,
                 "min_model_pixels": self.min_model_pixels,
                 "worst": self.worst_crack.map(|(eye, tau, n)| json!({"eye": eye, "tau": tau, "flagged": n})),
@@ -328,13 +336,30 @@ pub fn verify(renderer: &mut Renderer, file: &MresFile, scene: &SceneData, optio
         let full = renderer.render_with_depth(&camera.gpu_view(0.0, &scene.grid, n, FLAG_FRUSTUM_CULL), options.width, options.height)?;
         let full_depth = full.depth.unwrap_or_default();
         for &tau in &options.crack_taus {
-            let frame = renderer.render_with_depth(&camera.gpu_view(tau, &scene.grid, n, FLAG_FRUSTUM_CULL), options.width, options.height)?;
-            let depth = compare_depth(&camera, tau, frame.depth.as_deref().unwrap_or_default(), &full_depth);
+            let flags = FLAG_FRUSTUM_CULL | options.crack_flags;
+            let frame = renderer.render_with_depth(&camera.gpu_view(tau, &scene.grid, n, flags), options.width, options.height)?;
+            let depth = compare_depth(
+                &camera,
+                tau,
+                frame.depth.as_deref().unwrap_or_default(),
+                &full_depth,
+                options.depth_error_factor,
+            );
             report.depth_pixels += depth.pixels;
             report.depth_model_pixels += depth.model_pixels;
             report.depth_max_ratio = report.depth_max_ratio.max(depth.max_ratio);
             report.depth_violations += depth.ratios_over(options.depth_error_factor);
             let flagged = count_flagged(&frame.rgba);
+            // A back face within the depth tolerance of the full-detail surface is the cut
+            // folding within its error (a tiny part flattened or turned over); one beyond it
+            // shows the far inside: a hole.
+            let holes = frame
+                .rgba
+                .chunks_exact(4)
+                .zip(&depth.beyond)
+                .filter(|(p, &beyond)| *p == FLAG_RGBA && beyond)
+                .count() as u64;
+            report.max_hole_pixels = report.max_hole_pixels.max(holes);
             let model = count_model(&frame.rgba);
             report.crack_renders += 1;
             report.min_model_pixels = report.min_model_pixels.min(model);
@@ -363,6 +388,9 @@ struct DepthComparison {
     model_pixels: u64,
     max_ratio: f32,
     ratios: Vec<f32>,
+    /// Per pixel: beyond the allowed multiple of the bound (or model where the full render
+    /// has only background nearby).
+    beyond: Vec<bool>,
 }
 
 impl DepthComparison {
@@ -373,9 +401,10 @@ impl DepthComparison {
 
 /// Compares reverse-Z depth buffers (`z_near / view depth`, 0 = background) of a render at
 /// `tau` with the τ = 0 render (see the module docs for the rule).
-fn compare_depth(camera: &Camera, tau: f32, depth: &[f32], full: &[f32]) -> DepthComparison {
+fn compare_depth(camera: &Camera, tau: f32, depth: &[f32], full: &[f32], factor: f32) -> DepthComparison {
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let mut out = DepthComparison { pixels: 0, model_pixels: 0, max_ratio: 0.0, ratios: Vec::new() };
+    let mut out =
+        DepthComparison { pixels: 0, model_pixels: 0, max_ratio: 0.0, ratios: Vec::new(), beyond: vec![true; w * h] };
     if depth.len() != w * h || full.len() != w * h {
         out.max_ratio = f32::INFINITY;
         out.ratios.push(f32::INFINITY);
@@ -393,6 +422,7 @@ fn compare_depth(camera: &Camera, tau: f32, depth: &[f32], full: &[f32]) -> Dept
             let Some(za) = view_z(a) else {
                 // Background: fine if the full render has background nearby too.
                 let found = window(x, y, w, h, radius).any(|(qx, qy)| full[qy * w + qx] <= 0.0);
+                out.beyond[y * w + x] = !found;
                 if !found {
                     out.ratios.push(f32::INFINITY);
                     out.max_ratio = f32::INFINITY;
@@ -414,6 +444,7 @@ fn compare_depth(camera: &Camera, tau: f32, depth: &[f32], full: &[f32]) -> Dept
                 .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), z| (lo.min(z), hi.max(z)));
             let off = if lo > hi { f32::INFINITY } else { (lo - za).max(za - hi).max(0.0) };
             let ratio = if off <= dist * 1e-5 { 0.0 } else { off / bound };
+            out.beyond[y * w + x] = ratio > factor;
             if ratio > 1.0 {
                 out.ratios.push(ratio);
             }

@@ -132,6 +132,31 @@ fn gpu_selection_equals_cpu_and_the_closed_cube_shows_no_back_face() {
 }
 
 #[test]
+fn verify_fails_on_holes_but_not_on_folds() {
+    // Holes (every fifth selected cluster dropped) show back faces far behind the surface:
+    // verify must count them as hole pixels and fail.
+    let Some((device, counts)) = device("verify holes") else { return };
+    let file = cube_file();
+    let scene = SceneData::from_file(&file).unwrap();
+    let mut renderer = Renderer::new(&device, &scene, RendererOptions::default()).unwrap();
+    let options = VerifyOptions {
+        selection_cameras: 4,
+        crack_cameras: 6,
+        crack_taus: vec![0.0],
+        width: 128,
+        height: 128,
+        crack_flags: FLAG_DROP_SOME,
+        ..Default::default()
+    };
+    let report = verify(&mut renderer, &file, &scene, &options).unwrap();
+    assert!(report.max_hole_pixels > 100, "{:#?}", report.to_json());
+    assert!(!report.passed());
+    drop(renderer);
+    drop(device);
+    assert_silent(&counts);
+}
+
+#[test]
 fn crack_test_sees_a_hole() {
     let Some((device, counts)) = device("holes") else { return };
     let file = cube_file();
