@@ -191,8 +191,12 @@ impl<'a> Builder<'a> {
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
                 let (s, error) = match settings.error_bound {
                     ErrorBound::Measured => {
-                        let members = part.iter().map(|&c| own_errors[c as usize]).fold(0.0, f32::max);
-                        simplify_measured(mesh, &merged, locked, special, settings, part_size, members)?
+                        // Per input triangle, the own error of the member it came from.
+                        let errors: Vec<f32> = part
+                            .iter()
+                            .flat_map(|&c| std::iter::repeat_n(own_errors[c as usize], refs[c as usize].len() / 3))
+                            .collect();
+                        simplify_measured(mesh, &merged, &errors, locked, special, settings, part_size)?
                     }
                     ErrorBound::Simplifier => {
                         let s = simplify_group(mesh, &merged, locked, special, settings)?;

@@ -47,32 +47,36 @@ pub fn part_sizes(mesh: &WeldedMesh) -> Vec<f32> {
     (0..mesh.position_count as u32).map(|p| diagonal[sets.find(p) as usize] as f32).collect()
 }
 
-/// Simplifies a group (`simplify_group`) and measures its stored error ([`group_error`]); an
-/// outlier (measured distance above [`OUTLIER_RATIO`] × meshoptimizer's estimate) is simplified
-/// again with the vertices around its farthest samples locked as well, keeping the result with
-/// the smallest stored error. Returns the result and its stored error.
+/// Simplifies a group (`simplify_group`) and measures its stored error (see [`group_error`]);
+/// `triangle_errors` gives, per input triangle, the own error of the member it came from. An
+/// outlier (whose error exceeds the members' by more than [`OUTLIER_RATIO`] × meshoptimizer's
+/// estimate) is simplified again with the vertices around its farthest samples locked as well,
+/// keeping the result with the smallest stored error. Returns the result and its stored error.
 pub fn simplify_measured(
     mesh: &WeldedMesh,
     input: &[u32],
+    triangle_errors: &[f32],
     locked: impl Fn(u32) -> bool,
     special: &[(u64, u32)],
     settings: &BakeSettings,
     part_size: &[f32],
-    members_error: f32,
 ) -> Option<(Simplified, f32)> {
+    let members = triangle_errors.iter().copied().fold(0.0, f32::max);
+    let error_of = |s: &Simplified, hot_above: Option<f64>| {
+        let (total, hot) = measure(mesh, input, triangle_errors, &s.indices, part_size, s.error as f64, hot_above);
+        (stored(total, s.error).max(members), hot)
+    };
     let mut best = simplify_group(mesh, input, &locked, special, settings)?;
-    let (mut distance, _) = measure(mesh, input, &best.indices, part_size, floor(best.error, members_error), None);
-    let mut error = stored(members_error, distance, best.error);
+    let (mut error, _) = error_of(&best, None);
     let mut extra: Vec<u32> = Vec::new();
     for _ in 0..OUTLIER_RETRIES {
-        let estimate = best.error as f64;
-        if distance <= OUTLIER_RATIO * estimate {
+        let (estimate, added) = (best.error as f64, error as f64 - members as f64);
+        if added <= OUTLIER_RATIO * estimate {
             break;
         }
-        // Lock around the samples farther than half the worst one (and than the outlier ratio).
-        let hot_above = (distance * 0.5).max(OUTLIER_RATIO * estimate);
-        let floor_now = floor(best.error, members_error);
-        let (_, hot) = measure(mesh, input, &best.indices, part_size, floor_now, Some(hot_above));
+        // Lock around the samples farther than half the excess (and than the outlier ratio).
+        let hot_above = (added * 0.5 / SAMPLING_MARGIN).max(OUTLIER_RATIO * estimate);
+        let (_, hot) = error_of(&best, Some(hot_above));
         let before = extra.len();
         extra.extend(hot);
         extra.sort_unstable();
@@ -83,21 +87,18 @@ pub fn simplify_measured(
         let id = |v: u32| mesh.position_ids[v as usize];
         let lock = |v: u32| locked(v) || extra.binary_search(&id(v)).is_ok();
         let Some(retry) = simplify_group(mesh, input, lock, special, settings) else { break };
-        let (d, _) = measure(mesh, input, &retry.indices, part_size, floor(retry.error, members_error), None);
-        let e = stored(members_error, d, retry.error);
+        let (e, _) = error_of(&retry, None);
         if e >= error {
             break;
         }
-        (best, distance, error) = (retry, d, e);
+        (best, error) = (retry, e);
     }
     Some((best, error))
 }
 
-/// A group's stored error (object space): its members' largest error plus the margin-scaled
-/// sampled distance between `input` (the members' triangles) and `output` (the simplified
-/// ones), and at least `simplifier_error`, meshoptimizer's estimate. Both triangle lists are in
-/// welded vertex ids; `part_size` is [`part_sizes`]. A point of the input that is farther from
-/// the output than its part's size counts as its part's size (the part vanished).
+/// A group's stored error (object space) when all its members have error `members_error`: see
+/// [`simplify_measured`] and `measure`. At least `simplifier_error`, meshoptimizer's estimate.
+/// Both triangle lists are in welded vertex ids; `part_size` is [`part_sizes`].
 pub fn group_error(
     mesh: &WeldedMesh,
     input: &[u32],
@@ -106,40 +107,44 @@ pub fn group_error(
     members_error: f32,
     simplifier_error: f32,
 ) -> f32 {
-    let floor = floor(simplifier_error, members_error);
-    let (distance, _) = measure(mesh, input, output, part_size, floor, None);
-    stored(members_error, distance, simplifier_error)
+    let errors = vec![members_error; input.len() / 3];
+    let (total, _) = measure(mesh, input, &errors, output, part_size, simplifier_error as f64, None);
+    stored(total, simplifier_error).max(members_error)
 }
 
-/// Distances that would not raise the stored error above the simplifier's estimate need not be
-/// found exactly: a query stops at the first triangle within this.
-fn floor(simplifier_error: f32, members_error: f32) -> f64 {
-    ((simplifier_error as f64 - members_error as f64) / SAMPLING_MARGIN).max(0.0)
-}
-
-/// `members_error + SAMPLING_MARGIN × distance`, rounded up to f32 so that the stored error is
-/// never below the sum, and at least `simplifier_error`.
-fn stored(members_error: f32, distance: f64, simplifier_error: f32) -> f32 {
-    let error = members_error as f64 + SAMPLING_MARGIN * distance;
-    let rounded = error as f32;
-    let rounded = if (rounded as f64) < error { f32::from_bits(rounded.to_bits() + 1) } else { rounded };
+/// `total` rounded up to f32, and at least `simplifier_error`.
+fn stored(total: f64, simplifier_error: f32) -> f32 {
+    let rounded = total as f32;
+    let rounded = if (rounded as f64) < total { f32::from_bits(rounded.to_bits() + 1) } else { rounded };
     rounded.max(simplifier_error)
 }
 
-/// The sampled two-sided distance between `input` and `output` (welded vertex ids), or `floor`
-/// if that is larger (distances up to `floor` are not found exactly). With `hot_above`, also
-/// the position ids around the samples farther than it: the corners of the input triangles
-/// they lie on or are nearest to, and those triangles' neighbours'.
+/// The largest, over samples, of a sample's distance to the other side (× [`SAMPLING_MARGIN`])
+/// plus the error of the member it is measured from, or `floor` if that is larger (values up to
+/// `floor` are not found exactly). By the triangle inequality this bounds the distance between
+/// the output and the level-0 surface, both ways, if each member's error bounds the distance
+/// between its triangles and the level-0 surface under it: a point of the output is within
+/// `d + e` of level 0 through its nearest input point (on a member of error `e`); a level-0
+/// point under a member of error `e` is within `e` of that member's triangles, and those are
+/// within `d` of the output. Taking each sample's own member's error, not the largest member's,
+/// keeps one member's large error from adding to every other member's distance.
+/// `triangle_errors` gives each input triangle's member error. A point of the input farther
+/// from the output than its part's size counts as its part's size (the part vanished). With
+/// `hot_above`, also returns the position ids around the samples farther than it (distance
+/// alone): the corners of the input triangles they lie on or are nearest to, and those
+/// triangles' neighbours'.
 ///
 /// Samples: output → input, the centroid of each output triangle and the midpoint of each
 /// output edge (its corners are input vertices); input → output, the input vertices the output
 /// dropped, and the centroid and edge midpoints of the input triangles. A sample on a triangle
-/// or edge that both sides share is at distance 0 and skipped, and an edge shared by two
-/// triangles is sampled once. Distances are found in f32 around the group's centre and rounded
-/// up by a bound on that arithmetic's error (far below the position grid's step).
+/// or edge that both sides share is at distance 0 and left out (the members' errors themselves
+/// are kept by the caller); a corner or edge that several input triangles share is sampled
+/// once, with the largest of their errors. Distances are found in f32 around the group's centre
+/// and rounded up by a bound on that arithmetic's error (far below the position grid's step).
 fn measure(
     mesh: &WeldedMesh,
     input: &[u32],
+    triangle_errors: &[f32],
     output: &[u32],
     part_size: &[f32],
     floor: f64,
@@ -166,11 +171,17 @@ fn measure(
         indices.chunks_exact(3).map(|t| [local(t[0]), local(t[1]), local(t[2])]).collect()
     };
     let (input_tris, output_tris) = (triangles(input), triangles(output));
-    let (input_duty, output_duty) = duties(mesh, input, output);
+    let (input_duty, output_duty) = duties(mesh, input, output, triangle_errors);
 
-    let floor2 = (floor * floor) as f32;
     let hot2 = hot_above.map(|h| (h * h) as f32);
-    let mut worst2 = floor2;
+    let largest = triangle_errors.iter().copied().fold(0.0f32, f32::max) as f64;
+    let mut worst = floor;
+    // The squared distance below which a sample with member error `e` cannot raise `worst`
+    // (nor is hot): the query may stop at any triangle within it.
+    let enough2 = |worst: f64, e: f64| {
+        let d = ((worst - e) / SAMPLING_MARGIN - slack).max(0.0) as f32;
+        hot2.map_or(d * d, |h| h.min(d * d))
+    };
     let mut hot = Vec::new();
     let mid = |a: [f32; 3], b: [f32; 3]| [0, 1, 2].map(|k| (a[k] + b[k]) * 0.5);
     let centroid = |t: &Triangle<f32>| [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) * (1.0 / 3.0));
@@ -182,18 +193,22 @@ fn measure(
             _ => centroid(&tri),
         })
     };
+    let total = |d2: f32, e: f64| e + SAMPLING_MARGIN * ((d2 as f64).sqrt() + slack);
 
-    // Output → input.
+    // Output → input: the nearest input triangle's member error (any member's, until found
+    // exactly).
     let input_bvh = Bvh::new(&input_tris);
     let mut hint = usize::MAX;
     for ((t, tri), &duty) in output.chunks_exact(3).zip(&output_tris).zip(&output_duty) {
         for p in samples(*tri, duty) {
-            let enough2 = hot2.map_or(worst2, |h| h.min(worst2));
-            let (d2, nearest) = input_bvh.nearest_squared(&input_tris, p, enough2, hint);
+            let enough = enough2(worst, largest);
+            let (d2, nearest) = input_bvh.nearest_squared(&input_tris, p, enough, hint);
             hint = nearest;
-            worst2 = worst2.max(d2);
-            if hot2.is_some_and(|h| d2 > h) {
-                hot.extend(input[nearest * 3..nearest * 3 + 3].iter().chain(t).map(|&v| id(v)));
+            if d2 > enough {
+                worst = worst.max(total(d2, triangle_errors[nearest] as f64));
+                if hot2.is_some_and(|h| d2 > h) {
+                    hot.extend(input[nearest * 3..nearest * 3 + 3].iter().chain(t).map(|&v| id(v)));
+                }
             }
         }
     }
@@ -203,17 +218,19 @@ fn measure(
     let output_bvh = Bvh::new(&output_tris);
     let mut hint = usize::MAX;
     for pass in [0b000_0111u8, 0b111_1000] {
-        for ((t, tri), &duty) in input.chunks_exact(3).zip(&input_tris).zip(&input_duty) {
+        for (((t, tri), &duty), &e) in input.chunks_exact(3).zip(&input_tris).zip(&input_duty).zip(triangle_errors) {
             // A point farther than its part's size counts as that: the part vanished.
             let size = part_size[id(t[0]) as usize];
             for p in samples(*tri, duty & pass) {
-                let enough2 = hot2.map_or(worst2, |h| h.min(worst2));
-                let (d2, nearest) = output_bvh.nearest_squared(&output_tris, p, enough2, hint);
+                let enough = enough2(worst, e as f64);
+                let (d2, nearest) = output_bvh.nearest_squared(&output_tris, p, enough, hint);
                 hint = nearest;
                 let d2 = d2.min(size * size);
-                worst2 = worst2.max(d2);
-                if hot2.is_some_and(|h| d2 > h) {
-                    hot.extend(t.iter().map(|&v| id(v)));
+                if d2 > enough {
+                    worst = worst.max(total(d2, e as f64));
+                    if hot2.is_some_and(|h| d2 > h) {
+                        hot.extend(t.iter().map(|&v| id(v)));
+                    }
                 }
             }
         }
@@ -233,16 +250,16 @@ fn measure(
         hot.sort_unstable();
         hot.dedup();
     }
-    let distance = if worst2 > floor2 { (worst2 as f64).sqrt() + slack } else { floor };
-    (distance, hot)
+    (worst, hot)
 }
 
 /// Which samples each triangle of `input` and of `output` measures, as bits: corner k (bit k;
 /// input only: the corners the output dropped), the midpoint of edge k from corner k (bit 3 + k)
 /// and the centroid (bit 6). A sample that lies on both sides (a kept corner, an edge or a
 /// triangle both have) is at distance 0 and left out; a corner or edge that several triangles
-/// share is measured by the first of them only.
-fn duties(mesh: &WeldedMesh, input: &[u32], output: &[u32]) -> (Vec<u8>, Vec<u8>) {
+/// share is measured by one of them only: the first of those with the largest member error
+/// (`triangle_errors`, per input triangle).
+fn duties(mesh: &WeldedMesh, input: &[u32], output: &[u32], triangle_errors: &[f32]) -> (Vec<u8>, Vec<u8>) {
     let id = |v: u32| mesh.position_ids[v as usize];
     // (key, slot = 3 × triangle + corner), sorted: equal keys are adjacent, first slot first.
     let edges = |indices: &[u32]| -> Vec<(u64, u32)> {
@@ -270,15 +287,23 @@ fn duties(mesh: &WeldedMesh, input: &[u32], output: &[u32]) -> (Vec<u8>, Vec<u8>
         c.sort_unstable();
         c
     };
-    // Sets `bit(slot)` in `duty` for the first slot of each key of `a` that `b` lacks.
-    fn mark<K: Ord + Copy>(a: &[(K, u32)], b: &[(K, u32)], duty: &mut [u8], bit: impl Fn(u32) -> (usize, u8)) {
+    // Sets `bit(slot)` in `duty` for each key of `a` that `b` lacks, at the first of its slots
+    // with the largest `rank`.
+    fn mark<K: Ord + Copy>(
+        a: &[(K, u32)],
+        b: &[(K, u32)],
+        duty: &mut [u8],
+        rank: impl Fn(u32) -> f32,
+        bit: impl Fn(u32) -> (usize, u8),
+    ) {
         let mut j = 0;
         for run in a.chunk_by(|x, y| x.0 == y.0) {
             while j < b.len() && b[j].0 < run[0].0 {
                 j += 1;
             }
             if j >= b.len() || b[j].0 != run[0].0 {
-                let (t, m) = bit(run[0].1);
+                let slot = run.iter().map(|x| x.1).fold(run[0].1, |s, x| if rank(x) > rank(s) { x } else { s });
+                let (t, m) = bit(slot);
                 duty[t] |= m;
             }
         }
@@ -290,11 +315,14 @@ fn duties(mesh: &WeldedMesh, input: &[u32], output: &[u32]) -> (Vec<u8>, Vec<u8>
     let (input_keys, output_keys) = (triangles(input), triangles(output));
     let mut input_duty = vec![0u8; input.len() / 3];
     let mut output_duty = vec![0u8; output.len() / 3];
-    mark(&corners(input), &corners(output), &mut input_duty, corner);
-    mark(&input_edges, &output_edges, &mut input_duty, edge);
-    mark(&input_keys, &output_keys, &mut input_duty, whole);
-    mark(&output_edges, &input_edges, &mut output_duty, edge);
-    mark(&output_keys, &input_keys, &mut output_duty, whole);
+    let by_slot = |s: u32| triangle_errors[s as usize / 3];
+    let by_triangle = |t: u32| triangle_errors[t as usize];
+    let none = |_: u32| 0.0;
+    mark(&corners(input), &corners(output), &mut input_duty, by_slot, corner);
+    mark(&input_edges, &output_edges, &mut input_duty, by_slot, edge);
+    mark(&input_keys, &output_keys, &mut input_duty, by_triangle, whole);
+    mark(&output_edges, &input_edges, &mut output_duty, none, edge);
+    mark(&output_keys, &input_keys, &mut output_duty, none, whole);
     (input_duty, output_duty)
 }
 
