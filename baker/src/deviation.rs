@@ -6,11 +6,13 @@
 //! validator measured up to 2.6× more than it on the sample assets and 40× at one spot of the
 //! Stanford dragon. Here each group measures, locally, the sampled two-sided distance `d`
 //! between its output triangles S and its input triangles C (its members' triangles), and
-//! stores `members' largest error + d`: by the triangle inequality, if every point of C is
-//! within the members' error of the original surface (and back), every point of S is within
-//! that plus `d`. Measuring against C, not the original, keeps the cost local (a few thousand
-//! triangles per group), so the bake pays a small fraction of what measuring against the
-//! original did.
+//! stores the largest, over samples, of `d` at the sample plus the error of the member it is
+//! measured from: by the triangle inequality, if every point of a member is within that
+//! member's error of the original surface (and back), every point of S is within that bound.
+//! Measuring against C, not the original, keeps the cost local (a few thousand triangles per
+//! group), so the bake pays a small fraction of what measuring against the original did.
+//! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
+//! with their worst spots locked ([`simplify_measured`]).
 
 use crate::bvh::{Bvh, Triangle};
 use crate::edges::edge_key;
