@@ -15,7 +15,7 @@ use std::time::Instant;
 
 /// Bumped whenever the baker's output for the same input and settings would change; part of
 /// every cache key.
-pub const BAKER_VERSION: u32 = 2;
+pub const BAKER_VERSION: u32 = 3;
 
 /// The mesh files under `root` (sorted) and how many other files were skipped.
 pub fn find_assets(root: &Path) -> std::io::Result<(Vec<PathBuf>, usize)> {

@@ -2,29 +2,84 @@
 //! point-triangle distance. Used by the validator's honesty measure (`honesty`) and by the
 //! baker's per-group deviation (`deviation`), so that both measure distance the same way.
 
-/// Bounding-volume hierarchy over triangles for nearest-point queries (median split on the
-/// longest axis, leaves of up to 4 triangles).
-pub struct Bvh {
-    nodes: Vec<Node>,
-    order: Vec<u32>,
+/// The coordinate type of a [`Bvh`]: `f64` for the validator, `f32` for the baker's per-group
+/// measure (half the memory, and its error is far below the position grid's step).
+pub trait Real:
+    Copy
+    + PartialOrd
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<Output = Self>
+    + std::ops::Div<Output = Self>
+{
+    /// 0.
+    const ZERO: Self;
+    /// 1.
+    const ONE: Self;
+    /// +∞.
+    const INFINITY: Self;
+    /// −∞.
+    const NEG_INFINITY: Self;
+    /// The larger of the two.
+    fn max(self, other: Self) -> Self;
+    /// The smaller of the two.
+    fn min(self, other: Self) -> Self;
+    /// Square root.
+    fn sqrt(self) -> Self;
 }
 
-struct Node {
-    lo: [f64; 3],
-    hi: [f64; 3],
+macro_rules! real {
+    ($t:ty) => {
+        impl Real for $t {
+            const ZERO: Self = 0.0;
+            const ONE: Self = 1.0;
+            const INFINITY: Self = <$t>::INFINITY;
+            const NEG_INFINITY: Self = <$t>::NEG_INFINITY;
+            fn max(self, other: Self) -> Self {
+                <$t>::max(self, other)
+            }
+            fn min(self, other: Self) -> Self {
+                <$t>::min(self, other)
+            }
+            fn sqrt(self) -> Self {
+                <$t>::sqrt(self)
+            }
+        }
+    };
+}
+real!(f32);
+real!(f64);
+
+/// A triangle: three corners.
+pub type Triangle<T> = [[T; 3]; 3];
+
+/// Bounding-volume hierarchy over triangles for nearest-point queries (median split on the
+/// longest axis, leaves of up to 4 triangles).
+pub struct Bvh<T = f64> {
+    nodes: Vec<Node<T>>,
+    order: Vec<u32>,
+    /// Per triangle, the leaf that holds it (for queries that start from a hint).
+    leaf_of: Vec<u32>,
+}
+
+struct Node<T> {
+    lo: [T; 3],
+    hi: [T; 3],
     /// Leaf: first triangle in `order` and count; inner: children at `start` and `start + 1`.
     start: u32,
     count: u32,
 }
 
-impl Bvh {
+impl<T: Real> Bvh<T> {
     /// Builds the hierarchy over `tris` (which later queries must pass again).
-    pub fn new(tris: &[[[f64; 3]; 3]]) -> Bvh {
+    pub fn new(tris: &[Triangle<T>]) -> Bvh<T> {
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
-        let mut nodes = vec![Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 }];
+        let mut leaf_of = vec![0u32; tris.len()];
+        let empty = Node { lo: [T::ZERO; 3], hi: [T::ZERO; 3], start: 0, count: 0 };
+        let mut nodes = vec![empty];
         let mut stack = vec![(0usize, 0usize, tris.len())];
         while let Some((node, start, end)) = stack.pop() {
-            let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+            let (mut lo, mut hi) = ([T::INFINITY; 3], [T::NEG_INFINITY; 3]);
             for &t in &order[start..end] {
                 for v in &tris[t as usize] {
                     for k in 0..3 {
@@ -38,12 +93,27 @@ impl Bvh {
             if end - start <= 4 {
                 nodes[node].start = start as u32;
                 nodes[node].count = (end - start) as u32;
+                for &t in &order[start..end] {
+                    leaf_of[t as usize] = node as u32;
+                }
                 continue;
             }
-            let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
-            let centroid = |t: u32| tris[t as usize].iter().map(|v| v[axis]).sum::<f64>();
+            let extent = |a: usize| hi[a] - lo[a];
+            let axis = if extent(0) >= extent(1) && extent(0) >= extent(2) {
+                0
+            } else if extent(1) >= extent(2) {
+                1
+            } else {
+                2
+            };
+            let centroid = |t: u32| {
+                let v = &tris[t as usize];
+                v[0][axis] + v[1][axis] + v[2][axis]
+            };
             let mid = (start + end) / 2;
-            order[start..end].select_nth_unstable_by(mid - start, |&a, &b| centroid(a).total_cmp(&centroid(b)));
+            order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
+                centroid(a).partial_cmp(&centroid(b)).unwrap_or(std::cmp::Ordering::Equal)
+            });
             let child = nodes.len();
             nodes.push(Node { lo, hi, start: 0, count: 0 });
             nodes.push(Node { lo, hi, start: 0, count: 0 });
@@ -51,57 +121,66 @@ impl Bvh {
             stack.push((child, start, mid));
             stack.push((child + 1, mid, end));
         }
-        Bvh { nodes, order }
+        Bvh { nodes, order, leaf_of }
     }
 
     /// Distance from `p` to the nearest of `tris` (infinite when there are none).
-    pub fn distance(&self, tris: &[[[f64; 3]; 3]], p: [f64; 3]) -> f64 {
+    pub fn distance(&self, tris: &[Triangle<T>], p: [T; 3]) -> T {
         self.nearest(tris, p).0
     }
 
     /// Distance to the nearest triangle and its index.
-    pub fn nearest(&self, tris: &[[[f64; 3]; 3]], p: [f64; 3]) -> (f64, usize) {
-        self.nearest_beyond(tris, p, 0.0)
+    pub fn nearest(&self, tris: &[Triangle<T>], p: [T; 3]) -> (T, usize) {
+        self.nearest_beyond(tris, p, T::ZERO)
     }
 
     /// Like [`Bvh::nearest`] where the distance exceeds `enough`; otherwise some triangle
     /// within `enough` of `p` (the search stops at the first one found). For a maximum over
     /// many points of their distance, where only distances above the current maximum matter.
-    pub fn nearest_beyond(&self, tris: &[[[f64; 3]; 3]], p: [f64; 3], enough: f64) -> (f64, usize) {
-        let mut best = (f64::INFINITY, 0usize);
+    pub fn nearest_beyond(&self, tris: &[Triangle<T>], p: [T; 3], enough: T) -> (T, usize) {
+        let (d2, t) = self.nearest_squared(tris, p, enough * enough, usize::MAX);
+        (d2.sqrt(), t)
+    }
+
+    /// Squared distance form of [`Bvh::nearest_beyond`] that first tries the leaf holding
+    /// triangle `hint` (neighbouring query points are near the same triangles); `usize::MAX`
+    /// for no hint.
+    pub fn nearest_squared(&self, tris: &[Triangle<T>], p: [T; 3], enough2: T, hint: usize) -> (T, usize) {
+        let mut best = (T::INFINITY, 0usize);
         if self.order.is_empty() {
             return best;
+        }
+        let mut skip = u32::MAX;
+        if let Some(&leaf) = self.leaf_of.get(hint) {
+            let d = point_triangle_distance2(p, &tris[hint]);
+            best = (d, hint);
+            if d <= enough2 || self.leaf(tris, leaf, p, enough2, &mut best) {
+                return best;
+            }
+            skip = leaf;
         }
         // Depth is at most ~2·log2(n) + 1; 96 entries cover any mesh that fits in memory.
         let mut stack = [0u32; 96];
         let mut top = 1usize;
-        let box_dist = |n: &Node| {
-            let d = [0, 1, 2].map(|k| (n.lo[k] - p[k]).max(p[k] - n.hi[k]).max(0.0));
-            d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-        };
         while top > 0 {
             top -= 1;
-            let n = &self.nodes[stack[top] as usize];
-            if box_dist(n) >= best.0 * best.0 {
+            let index = stack[top];
+            let n = &self.nodes[index as usize];
+            if index == skip || box_distance2(n, p) >= best.0 {
                 continue;
             }
             if n.count > 0 {
-                for &t in &self.order[n.start as usize..(n.start + n.count) as usize] {
-                    let d = point_triangle_distance(p, &tris[t as usize]);
-                    if d < best.0 {
-                        best = (d, t as usize);
-                        if d <= enough {
-                            return best;
-                        }
-                    }
+                if self.leaf(tris, index, p, enough2, &mut best) {
+                    return best;
                 }
             } else if top + 2 <= stack.len() {
                 let (a, b) = (n.start, n.start + 1);
-                let (near, far) = if box_dist(&self.nodes[a as usize]) <= box_dist(&self.nodes[b as usize]) {
-                    (a, b)
-                } else {
-                    (b, a)
-                };
+                let (near, far) =
+                    if box_distance2(&self.nodes[a as usize], p) <= box_distance2(&self.nodes[b as usize], p) {
+                        (a, b)
+                    } else {
+                        (b, a)
+                    };
                 stack[top] = far;
                 stack[top + 1] = near;
                 top += 2;
@@ -109,47 +188,74 @@ impl Bvh {
         }
         best
     }
+
+    /// Tests the triangles of leaf `index` against `best` (squared distance, triangle); true
+    /// once one is within `enough2`.
+    fn leaf(&self, tris: &[Triangle<T>], index: u32, p: [T; 3], enough2: T, best: &mut (T, usize)) -> bool {
+        let n = &self.nodes[index as usize];
+        for &t in &self.order[n.start as usize..(n.start + n.count) as usize] {
+            let d = point_triangle_distance2(p, &tris[t as usize]);
+            if d < best.0 {
+                *best = (d, t as usize);
+                if d <= enough2 {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
+fn box_distance2<T: Real>(n: &Node<T>, p: [T; 3]) -> T {
+    let d = [0, 1, 2].map(|k| (n.lo[k] - p[k]).max(p[k] - n.hi[k]).max(T::ZERO));
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
 }
 
 /// Distance from `p` to triangle `t` (closest point by region, Ericson's "Real-Time Collision
 /// Detection" §5.1.5).
-pub fn point_triangle_distance(p: [f64; 3], t: &[[f64; 3]; 3]) -> f64 {
-    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+pub fn point_triangle_distance<T: Real>(p: [T; 3], t: &Triangle<T>) -> T {
+    point_triangle_distance2(p, t).sqrt()
+}
+
+/// Squared [`point_triangle_distance`].
+pub fn point_triangle_distance2<T: Real>(p: [T; 3], t: &Triangle<T>) -> T {
+    let sub = |a: [T; 3], b: [T; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [T; 3], b: [T; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let zero = T::ZERO;
     let (a, b, c) = (t[0], t[1], t[2]);
     let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
     let (d1, d2) = (dot(ab, ap), dot(ac, ap));
-    let at = |u: f64, v: f64| -> f64 {
+    let at = |u: T, v: T| -> T {
         let q = [a[0] + ab[0] * u + ac[0] * v, a[1] + ab[1] * u + ac[1] * v, a[2] + ab[2] * u + ac[2] * v];
-        dot(sub(p, q), sub(p, q)).sqrt()
+        dot(sub(p, q), sub(p, q))
     };
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return at(0.0, 0.0);
+    if d1 <= zero && d2 <= zero {
+        return dot(ap, ap);
     }
     let bp = sub(p, b);
     let (d3, d4) = (dot(ab, bp), dot(ac, bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return at(1.0, 0.0);
+    if d3 >= zero && d4 <= d3 {
+        return dot(bp, bp);
     }
     let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return at(d1 / (d1 - d3), 0.0);
+    if vc <= zero && d1 >= zero && d3 <= zero {
+        return at(d1 / (d1 - d3), zero);
     }
     let cp = sub(p, c);
     let (d5, d6) = (dot(ab, cp), dot(ac, cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return at(0.0, 1.0);
+    if d6 >= zero && d5 <= d6 {
+        return dot(cp, cp);
     }
     let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return at(0.0, d2 / (d2 - d6));
+    if vb <= zero && d2 >= zero && d6 <= zero {
+        return at(zero, d2 / (d2 - d6));
     }
     let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+    if va <= zero && (d4 - d3) >= zero && (d5 - d6) >= zero {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return at(1.0 - w, w);
+        return at(T::ONE - w, w);
     }
-    let denom = 1.0 / (va + vb + vc);
+    let denom = T::ONE / (va + vb + vc);
     at(vb * denom, vc * denom)
 }
 
@@ -159,7 +265,7 @@ mod tests {
 
     #[test]
     fn point_triangle_distances() {
-        let t = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let t: [[f64; 3]; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
         assert!((point_triangle_distance([0.2, 0.2, 0.5], &t) - 0.5).abs() < 1e-12);
         assert!((point_triangle_distance([-1.0, 0.0, 0.0], &t) - 1.0).abs() < 1e-12);
         assert!((point_triangle_distance([1.0, 1.0, 0.0], &t) - 0.5f64.sqrt()).abs() < 1e-12);
@@ -172,5 +278,12 @@ mod tests {
         let bvh = Bvh::new(&tris);
         let (d, t) = bvh.nearest(&tris, [50.2, 0.2, 3.0]);
         assert!((d - 3.0).abs() < 1e-12 && t == 50, "{d} {t}");
+        // A hint far from the point still finds the nearest triangle.
+        let (d2, t) = bvh.nearest_squared(&tris, [50.2, 0.2, 3.0], 0.0, 3);
+        assert!((d2 - 9.0f64).abs() < 1e-9 && t == 50, "{d2} {t}");
+        let small: Vec<[[f32; 3]; 3]> = tris.iter().map(|t| t.map(|v| v.map(|x| x as f32))).collect();
+        let bvh = Bvh::new(&small);
+        let (d2, t) = bvh.nearest_squared(&small, [20.2, 0.2, -2.0], 0.0, 90);
+        assert!((d2 - 4.0f32).abs() < 1e-5 && t == 20, "{d2} {t}");
     }
 }

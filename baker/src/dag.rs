@@ -8,7 +8,7 @@
 //! parallel but collected in partition order.
 
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
-use crate::deviation::{group_error, part_sizes};
+use crate::deviation::{part_sizes, simplify_measured};
 use crate::edges::sorted_edge_keys;
 use crate::partition::{cluster_graph, partition};
 use crate::settings::{BakeSettings, ErrorBound};
@@ -189,13 +189,20 @@ impl<'a> Builder<'a> {
             .par_iter()
             .map(|part| {
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
-                let s = simplify_group(mesh, &merged, locked, special, settings)?;
-                let error = match settings.error_bound {
+                let (s, error) = match settings.error_bound {
                     ErrorBound::Measured => {
-                        let members = part.iter().map(|&c| own_errors[c as usize]).fold(0.0, f32::max);
-                        group_error(mesh, &merged, &s.indices, part_size, members, s.error)
+                        // Per input triangle, the own error of the member it came from.
+                        let errors: Vec<f32> = part
+                            .iter()
+                            .flat_map(|&c| std::iter::repeat_n(own_errors[c as usize], refs[c as usize].len() / 3))
+                            .collect();
+                        simplify_measured(mesh, &merged, &errors, locked, special, settings, part_size)?
                     }
-                    ErrorBound::Simplifier => s.error,
+                    ErrorBound::Simplifier => {
+                        let s = simplify_group(mesh, &merged, locked, special, settings)?;
+                        let error = s.error;
+                        (s, error)
+                    }
                 };
                 Some((
                     split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings),

@@ -77,6 +77,10 @@ enum Command {
         /// Runs per builder; the minimum time and RSS are reported.
         #[arg(long, default_value_t = 1)]
         repeat: usize,
+        /// Bake settings from this pipeline.toml's [bake] table (default: the compiled-in ones),
+        /// e.g. to compare `error_bound` modes.
+        #[arg(long)]
+        config: Option<PathBuf>,
         /// Print as JSON.
         #[arg(long)]
         json: bool,
@@ -97,6 +101,9 @@ enum Command {
         builder: String,
         /// Mesh file.
         input: PathBuf,
+        /// pipeline.toml whose [bake] settings to use.
+        #[arg(long)]
+        config: Option<PathBuf>,
     },
     /// Write a generated test mesh as OBJ: sphere N (12·N² triangles, closed), terrain N
     /// (2·N² triangles, open), boxes N (N disconnected boxes of 192 triangles), seamed-sphere N
@@ -239,7 +246,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             eprintln!("{}: {} clusters, {} triangles", output.display(), cut.len(), mesh.triangle_count());
             Ok(ExitCode::SUCCESS)
         }
-        Command::Bench { input, repeat, json } => bench(&input, repeat.max(1), json),
+        Command::Bench { input, repeat, config, json } => bench(&input, repeat.max(1), config.as_deref(), json),
         Command::Cache { action, cache_dir } => {
             let disk = cache::LocalDisk::open(&cache_dir).with_context(|| format!("cache {}", cache_dir.display()))?;
             match action {
@@ -290,8 +297,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::BenchChild { builder, input } => {
-            let settings = BakeSettings::default();
+        Command::BenchChild { builder, input, config } => {
+            let settings = match config {
+                Some(path) => baker::config::PipelineConfig::load(&path).map_err(anyhow::Error::msg)?.bake,
+                None => BakeSettings::default(),
+            };
             let mesh = formats::import::import_file(&input, &Default::default())?;
             let run = match builder.as_str() {
                 "mres" => run_mres(mesh, &settings)?,
@@ -354,13 +364,18 @@ fn inspect(f: &MresFile, json: bool) -> Result<()> {
     Ok(())
 }
 
-fn bench(input: &Path, repeat: usize, json: bool) -> Result<ExitCode> {
+fn bench(input: &Path, repeat: usize, config: Option<&Path>, json: bool) -> Result<ExitCode> {
     let exe = std::env::current_exe()?;
     let mut best: Vec<BuilderRun> = Vec::new();
     for builder in ["mres", "clusterlod"] {
         let mut runs = Vec::new();
         for _ in 0..repeat {
-            let out = std::process::Command::new(&exe).args(["bench-child", builder]).arg(input).output()?;
+            let mut child = std::process::Command::new(&exe);
+            child.args(["bench-child", builder]).arg(input);
+            if let Some(path) = config {
+                child.arg("--config").arg(path);
+            }
+            let out = child.output()?;
             if !out.status.success() {
                 bail!("{builder} on {}: {}", input.display(), String::from_utf8_lossy(&out.stderr));
             }
