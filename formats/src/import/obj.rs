@@ -164,16 +164,7 @@ fn scan(text: &str) -> KindResult<Scan> {
             "vt" => counts[1] += 1,
             "vn" => counts[2] += 1,
             "l" | "mtllib" => scan.blank.push(keyword_offset),
-            "usemtl" => {
-                // Same name extraction as tobj, so the names match its lookups.
-                let name = line.split_once(' ').unwrap_or_default().1.trim();
-                if name.is_empty() {
-                    return Err(parse_error(line_no, "usemtl without a material name"));
-                }
-                if !scan.material_names.iter().any(|n| n == name) {
-                    scan.material_names.push(name.to_owned());
-                }
-            }
+            "usemtl" => record_material(&mut scan.material_names, line, line_no)?,
             "f" => {
                 let mut corners = 0u64;
                 for vertex in words {
@@ -202,6 +193,24 @@ fn check_finite_vertex(words: std::str::SplitWhitespace<'_>, line_no: usize) -> 
         return Err(ImportErrorKind::NonFinitePosition(format!("line {line_no}: v {coordinates:?}")));
     }
     Ok(())
+}
+
+/// Adds a `usemtl` line's name to `names` (in order of first use), extracting it as tobj
+/// does so that the names match its lookups.
+pub(super) fn record_material(names: &mut Vec<String>, line: &str, line_no: usize) -> KindResult<()> {
+    let name = usemtl_name(line);
+    if name.is_empty() {
+        return Err(parse_error(line_no, "usemtl without a material name"));
+    }
+    if !names.iter().any(|n| n == name) {
+        names.push(name.to_owned());
+    }
+    Ok(())
+}
+
+/// The material name of a `usemtl` line, as tobj reads it.
+pub(super) fn usemtl_name(line: &str) -> &str {
+    line.split_once(' ').unwrap_or_default().1.trim()
 }
 
 pub(super) fn parse_error(line_no: usize, message: &str) -> ImportErrorKind {

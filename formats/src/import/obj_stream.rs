@@ -18,7 +18,7 @@ use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
-use super::obj::{out_of_range, parse_error, SLOTS};
+use super::obj::{out_of_range, parse_error, record_material, usemtl_name, SLOTS};
 use super::{
     check_triangle_count, check_vertex_count, unit_or_zero, ImportError, ImportErrorKind, ImportLimits, KindResult,
 };
@@ -91,15 +91,7 @@ impl ObjVertices {
                     out.normals.push(unit_or_zero(c));
                     counts[2] += 1;
                 }
-                "usemtl" => {
-                    let name = line.split_once(' ').unwrap_or_default().1.trim();
-                    if name.is_empty() {
-                        return Err(parse_error(line_no, "usemtl without a material name"));
-                    }
-                    if !out.material_names.iter().any(|n| n == name) {
-                        out.material_names.push(name.to_owned());
-                    }
-                }
+                "usemtl" => record_material(&mut out.material_names, line, line_no)?,
                 "f" => {
                     let mut corners = 0u64;
                     for vertex in words {
@@ -153,7 +145,7 @@ impl ObjVertices {
                 Some("vt") => counts[1] += 1,
                 Some("vn") => counts[2] += 1,
                 Some("usemtl") => {
-                    let name = line.split_once(' ').unwrap_or_default().1.trim();
+                    let name = usemtl_name(line);
                     material = self.material_names.iter().position(|n| n == name).map_or(unnamed, |m| m as u32);
                 }
                 Some("f") => {
