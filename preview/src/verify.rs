@@ -53,9 +53,9 @@ pub struct VerifyOptions {
     /// Depth check: allowed multiple of the error bound (see the module docs).
     pub depth_error_factor: f32,
     /// Depth check: largest fraction of model pixels allowed over `depth_error_factor` × the
-    /// bound. Not 0: the stored errors are estimates, and on scanned meshes a few pixels (at
-    /// most 0.015% seen: Nefertiti, the hammer scan, a 0.5 M-triangle sphere) exceed even 4× by up
-    /// to 50× (where is not yet investigated).
+    /// bound. Not 0: the comparison is approximate at silhouettes, and on scanned meshes a few
+    /// pixels (at most 0.015% seen with meshoptimizer's estimates, 0.005% with measured errors)
+    /// exceed even 4× (where is not yet investigated).
     pub depth_max_fraction: f64,
     /// Test hook: extra `GpuView` flags for the crack renders at τ > 0 (e.g. `FLAG_DROP_SOME`
     /// to make holes and see the test catch them).
