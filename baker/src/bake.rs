@@ -2,7 +2,7 @@
 
 use crate::dag::{build_dag, BuildStats};
 use crate::settings::BakeSettings;
-use crate::shard::{build_sharded, ShardSource, ShardedDag};
+use crate::shard::{build_sharded, ShardSource};
 use crate::weld::weld;
 use formats::import::obj_stream::{Corner, ObjVertices, NONE};
 use formats::import::{import_file, ImportLimits, InputKind};
@@ -50,6 +50,9 @@ pub enum BakeError {
     /// The settings are out of range.
     #[error("settings: {0}")]
     Settings(String),
+    /// A sharded build failed (its spill files, or merging the shards).
+    #[error("sharding: {0}")]
+    Shard(String),
     /// The mesh has no triangles left after welding.
     #[error("no triangles left after welding (all {0} were degenerate)")]
     Empty(u64),
@@ -86,13 +89,11 @@ pub fn bake_file_with_progress(path: &Path, settings: &BakeSettings, progress: P
             tracing::info!(triangles = obj.triangles, seconds = import_seconds, "streaming import, pass 1");
             let (positions, normals, uvs) =
                 (std::mem::take(&mut obj.positions), std::mem::take(&mut obj.normals), std::mem::take(&mut obj.uvs));
-            let for_each = |f: &mut dyn FnMut([Corner; 3], u32)| obj.for_each_triangle(path, f);
-            let source =
-                ShardSource { positions, normals, uvs, triangles: obj.triangles, for_each_triangle: &for_each };
-            let dag = build_sharded(source, settings, progress)?;
-            let mut baked = write_sharded(dag, settings, progress)?;
+            let triangles = obj.triangles;
+            let for_each_triangle = Box::new(move |f: &mut dyn FnMut([Corner; 3], u32)| obj.for_each_triangle(path, f));
+            let source = ShardSource { positions, normals, uvs, triangles, for_each_triangle };
+            let mut baked = bake_sharded(source, settings, progress)?;
             baked.stats.import_seconds = import_seconds;
-            baked.stats.build_seconds = start.elapsed().as_secs_f64() - import_seconds;
             return Ok(baked);
         }
     }
@@ -120,24 +121,21 @@ pub fn bake_mesh_with_progress(
         let SourceMesh { positions, normals, uvs, indices, materials, degenerate_dropped } = mesh;
         let index_or_none = |present: bool| if present { |v: u32| v } else { |_: u32| NONE };
         let (vn, vt) = (index_or_none(normals.is_some()), index_or_none(uvs.is_some()));
-        let for_each = |f: &mut dyn FnMut([Corner; 3], u32)| {
+        let triangles = materials.len() as u64;
+        let for_each_triangle = Box::new(move |f: &mut dyn FnMut([Corner; 3], u32)| {
             for (t, &material) in indices.chunks_exact(3).zip(&materials) {
                 f([0, 1, 2].map(|k| Corner { v: t[k], vt: vt(t[k]), vn: vn(t[k]) }), material);
             }
             Ok(())
-        };
+        });
         let source = ShardSource {
             positions,
             normals: normals.unwrap_or_default(),
             uvs: uvs.unwrap_or_default(),
-            triangles: materials.len() as u64,
-            for_each_triangle: &for_each,
+            triangles,
+            for_each_triangle,
         };
-        let start = Instant::now();
-        let dag = build_sharded(source, settings, progress)?;
-        drop((indices, materials));
-        let mut baked = write_sharded(dag, settings, progress)?;
-        baked.stats.build_seconds = start.elapsed().as_secs_f64();
+        let mut baked = bake_sharded(source, settings, progress)?;
         baked.stats.degenerate_dropped += degenerate_dropped;
         baked.stats.source_triangles += degenerate_dropped;
         return Ok(baked);
@@ -179,9 +177,10 @@ pub fn bake_mesh_with_progress(
 /// smaller than this times `shard_triangles` cannot need sharding and are imported whole.
 const OBJ_MIN_BYTES_PER_TRIANGLE: u64 = 8;
 
-/// Writes the result of a sharded build (see `shard`).
-fn write_sharded(dag: ShardedDag, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
+/// Bakes a mesh in shards (see `shard`); the source is freed once the shards are read.
+fn bake_sharded(source: ShardSource, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
     let start = Instant::now();
+    let dag = build_sharded(source, settings, progress)?;
     progress("write");
     let write_start = Instant::now();
     let (groups, clusters) = (dag.groups.len() as u64, dag.clusters.len() as u64);
@@ -197,7 +196,6 @@ fn write_sharded(dag: ShardedDag, settings: &BakeSettings, progress: Progress) -
         clusters,
         build,
         import_seconds: 0.0,
-        // The write only; callers add the build.
         build_seconds: start.elapsed().as_secs_f64(),
         bytes: bytes.len() as u64,
     };

@@ -65,23 +65,34 @@ impl BuildStats {
     }
 }
 
+/// Times the stages of a build into [`BuildStats::stage_seconds`].
+pub(crate) struct StageClock(std::time::Instant);
+
+impl StageClock {
+    pub fn start() -> StageClock {
+        StageClock(std::time::Instant::now())
+    }
+
+    /// Records the time since the previous lap (or the start) as `stage`.
+    pub fn lap(&mut self, stats: &mut BuildStats, stage: &str) {
+        stats.stage_seconds.push((stage.to_string(), self.0.elapsed().as_secs_f64()));
+        self.0 = std::time::Instant::now();
+    }
+}
+
 /// Builds the cluster DAG of a welded mesh.
 pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings, progress: crate::bake::Progress) -> (Dag, BuildStats) {
-    let mut clock = std::time::Instant::now();
-    let mut lap = |stats: &mut BuildStats, stage: &str| {
-        stats.stage_seconds.push((stage.to_string(), clock.elapsed().as_secs_f64()));
-        clock = std::time::Instant::now();
-    };
+    let mut clock = StageClock::start();
     let mut builder = Builder::new(mesh, settings, level0(mesh, settings), 0, 0);
-    lap(&mut builder.stats, "level 0");
+    clock.lap(&mut builder.stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
     while builder.step(progress) {}
     builder.make_roots();
-    lap(&mut builder.stats, "levels");
+    clock.lap(&mut builder.stats, "levels");
     let mut stats = std::mem::take(&mut builder.stats);
     let (groups, clusters) = (builder.groups, builder.clusters);
     let dag = Dag { header: header(mesh, settings), groups, clusters: to_dag_clusters(mesh, clusters) };
-    lap(&mut stats, "encode");
+    clock.lap(&mut stats, "encode");
     (dag, stats)
 }
 

@@ -23,11 +23,12 @@
 //! the input and the settings, never on the thread count.
 
 use crate::bake::{BakeError, Progress};
-use crate::dag::{header, level0, to_dag_cluster, BuildStats, Builder, Cluster};
+use crate::dag::{header, level0, to_dag_cluster, BuildStats, Builder, Cluster, StageClock};
 use crate::settings::BakeSettings;
 use crate::weld::{uv_quant, weld_on, WeldedMesh};
 use formats::import::obj_stream::{Corner, NONE};
 use formats::import::ImportError;
+use formats::mesh::bounds;
 use formats::mres::write::EncodedCluster;
 use formats::mres::{DagCluster, Grid, Group, Header, Sphere, UvQuant, NO_GROUP};
 use formats::SourceMesh;
@@ -54,9 +55,9 @@ pub struct ShardSource<'a> {
     /// Triangles to stream (an estimate is fine: it only sizes the cells).
     pub triangles: u64,
     /// Calls its argument with every triangle's corners (attributes absent: [`NONE`]) and
-    /// material, always in the same order.
+    /// material, always in the same order. Owns what it reads (freed with the source).
     #[allow(clippy::type_complexity)]
-    pub for_each_triangle: &'a (dyn Fn(&mut dyn FnMut([Corner; 3], u32)) -> Result<(), ImportError> + Sync),
+    pub for_each_triangle: Box<dyn Fn(&mut dyn FnMut([Corner; 3], u32)) -> Result<(), ImportError> + Sync + 'a>,
 }
 
 /// The DAG of a sharded build, with its clusters already encoded.
@@ -85,11 +86,7 @@ pub fn build_sharded(
     progress: Progress,
 ) -> Result<ShardedDag, BakeError> {
     let mut stats = BuildStats::default();
-    let mut clock = std::time::Instant::now();
-    let mut lap = |stats: &mut BuildStats, stage: &str| {
-        stats.stage_seconds.push((stage.to_string(), clock.elapsed().as_secs_f64()));
-        clock = std::time::Instant::now();
-    };
+    let mut clock = StageClock::start();
     let (lo, hi) = bounds(&source.positions).ok_or(BakeError::Empty(0))?;
     let grid = Grid::covering(lo, hi, settings.position_bits);
     let keep_uvs = settings.keep_uvs && !source.uvs.is_empty();
@@ -139,7 +136,7 @@ pub fn build_sharded(
     if kept == 0 {
         return Err(BakeError::Empty(degenerate));
     }
-    lap(&mut stats, "spill");
+    clock.lap(&mut stats, "spill");
 
     // Stage 1: build the shards from their spill files.
     let context = ShardContext { settings, grid, uv, keep_normals, keep_uvs, multi_material };
@@ -164,13 +161,13 @@ pub fn build_sharded(
     stats.shards = shards.len() as u64;
     let mut dag = Collected::default();
     let mut top = dag.collect(shards, &mut stats);
-    lap(&mut stats, "shards");
+    clock.lap(&mut stats, "shards");
 
     // Later stages: while the top clusters are too many to merge, cut them into new cells
     // whose borders avoid the previous stage's, and build each a few levels.
     let mut stage = 1;
     loop {
-        let triangles: u64 = top.iter().map(|t| t.cluster.indices.len() as u64 / 3).sum();
+        let triangles = triangles_of(&top);
         if triangles <= settings.shard_triangles {
             break;
         }
@@ -185,12 +182,11 @@ pub fn build_sharded(
         let results: Vec<CellResult> =
             cell_tops.into_par_iter().map(|tops| context.build_cell(tops, level, false)).collect::<Result<_, _>>()?;
         top = dag.collect(results, &mut stats);
-        let left: u64 = top.iter().map(|t| t.cluster.indices.len() as u64 / 3).sum();
-        if left as f64 > SHARD_STOP_REDUCTION * triangles as f64 {
+        if triangles_of(&top) as f64 > SHARD_STOP_REDUCTION * triangles as f64 {
             break; // the rest is locked geometry (open edges): merging it whole is all that helps
         }
     }
-    lap(&mut stats, "stages");
+    clock.lap(&mut stats, "stages");
 
     // Merge what is left into one root.
     progress(&format!("merge: {} clusters", top.len()));
@@ -203,21 +199,12 @@ pub fn build_sharded(
     let header = Header { source_triangles: kept + degenerate, ..header };
     let Collected { groups, encoded, welded_vertices, degenerate: dropped, .. } = dag;
     degenerate += dropped;
-    lap(&mut stats, "merge");
+    clock.lap(&mut stats, "merge");
     Ok(ShardedDag { header, groups, clusters: encoded, stats, welded_vertices, degenerate_dropped: degenerate })
 }
 
 fn spill_error(e: std::io::Error) -> BakeError {
-    BakeError::Settings(format!("shard spill files (temporary directory; set TMPDIR to move it): {e}"))
-}
-
-fn bounds(positions: &[[f32; 3]]) -> Option<([f32; 3], [f32; 3])> {
-    let first = *positions.first()?;
-    Some(
-        positions.iter().fold((first, first), |(lo, hi), p| {
-            ([0, 1, 2].map(|k| lo[k].min(p[k])), [0, 1, 2].map(|k| hi[k].max(p[k])))
-        }),
-    )
+    BakeError::Shard(format!("spill files (temporary directory; set TMPDIR to move it): {e}"))
 }
 
 /// The shard cells: a k-d tree whose leaves are cells.
@@ -276,6 +263,11 @@ impl Cells {
         }
         (at & !LEAF) as usize
     }
+}
+
+/// Triangles in `top`.
+fn triangles_of(top: &[TopCluster]) -> u64 {
+    top.iter().map(|t| t.cluster.indices.len() as u64 / 3).sum()
 }
 
 /// A shard's coarsest cluster, carried into the merge.
@@ -556,7 +548,7 @@ impl ShardContext<'_> {
                     .zip(&t.cluster.indices)
                     .all(|(&v, &local)| merged.grid_positions[v as usize] == t.cluster.positions[local as usize]);
             if !exact {
-                return Err(BakeError::Settings(
+                return Err(BakeError::Shard(
                     "merging shards: the position grid does not round-trip in f32 (mesh too far from the origin for its \
                      size?); raise shard_triangles to bake it whole"
                         .into(),

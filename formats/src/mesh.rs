@@ -34,15 +34,16 @@ impl SourceMesh {
 
     /// Axis-aligned bounds `(min, max)` of all positions; `None` for an empty mesh.
     pub fn bounds(&self) -> Option<([f32; 3], [f32; 3])> {
-        let first = *self.positions.first()?;
-        let mut lo = first;
-        let mut hi = first;
-        for p in &self.positions {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-        Some((lo, hi))
+        bounds(&self.positions)
     }
+}
+
+/// Axis-aligned bounds `(min, max)` of `points`; `None` if there are none.
+pub fn bounds(points: &[[f32; 3]]) -> Option<([f32; 3], [f32; 3])> {
+    let first = *points.first()?;
+    Some(
+        points.iter().fold((first, first), |(lo, hi), p| {
+            ([0, 1, 2].map(|k| lo[k].min(p[k])), [0, 1, 2].map(|k| hi[k].max(p[k])))
+        }),
+    )
 }
