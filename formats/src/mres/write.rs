@@ -354,8 +354,7 @@ pub struct EncodedCluster {
 impl EncodedCluster {
     /// Encodes `c` for a file with `header`; `index` names the cluster in errors.
     pub fn new(c: &DagCluster, header: &Header, index: usize) -> Result<EncodedCluster, WriteError> {
-        let blocks = encode_blocks(c, header, index)?;
-        let (header_bytes, blocks) = blocks;
+        let (header_bytes, blocks) = encode_blocks(c, header, index)?;
         let mut data = Vec::new();
         let mut ends = [0u32; BLOCK_KINDS];
         let mut present = 0u8;
