@@ -14,7 +14,7 @@ if [ "${1:-}" = "--huge" ]; then
 fi
 dir=${1:-/tmp/mres-cases}
 mkdir -p "$dir"
-cargo build --release --quiet -p mres-baker
+cargo build --release --quiet -p mres-cli
 g() { target/release/mres generate "$@"; }
 if $huge; then
   g terrain 1582 -o "$dir/terrain-5M.obj"

@@ -3,7 +3,7 @@
 Small meshes are generated and baked with the Rust tools (`mres generate`,
 `bake-all`); the checker must pass them, agree with `mres validate --json`, and
 catch corruptions made here byte by byte. Skipped when the Rust tools are not
-built (cargo build --release -p mres-baker).
+built (cargo build --release -p mres-cli).
 
 Run: .venv/bin/pytest scripts/test_check_mres.py -q
 """
@@ -75,7 +75,7 @@ def fix_meta_checksum(data):
 @pytest.fixture(scope="module")
 def baked(tmp_path_factory):
     if not MRES.exists() or not BAKE_ALL.exists():
-        pytest.skip("Rust tools not built: cargo build --release -p mres-baker")
+        pytest.skip("Rust tools not built: cargo build --release -p mres-cli")
     d = tmp_path_factory.mktemp("mres")
     meshes = d / "meshes"
     meshes.mkdir()

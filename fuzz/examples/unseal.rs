@@ -16,8 +16,8 @@ fn main() {
     let bytes = std::fs::read(input).expect("read input");
     let unsealed = reseal::unseal(&bytes).expect("input is not a well-formed .mres file");
     if check {
-        let file = formats::mres::MresFile::parse(reseal::seal(&unsealed)).expect("resealed file parses");
-        let original = formats::mres::MresFile::parse(bytes).expect("original parses");
+        let file = mres_format::MresFile::parse(reseal::seal(&unsealed)).expect("resealed file parses");
+        let original = mres_format::MresFile::parse(bytes).expect("original parses");
         assert_eq!(file.decode_all().expect("resealed decodes"), original.decode_all().expect("original decodes"));
     }
     std::fs::write(output, &unsealed).expect("write output");

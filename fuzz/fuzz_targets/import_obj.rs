@@ -11,8 +11,8 @@ mod tempfile;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-use formats::import::obj_stream::ObjVertices;
-use formats::import::{import_file, referenced_files, ImportLimits};
+use mres_import::obj_stream::ObjVertices;
+use mres_import::{import_file, referenced_files, ImportLimits};
 use libfuzzer_sys::fuzz_target;
 
 const LIMITS: ImportLimits = ImportLimits { max_file_bytes: 1 << 20, max_triangles: 1 << 20 };
@@ -22,7 +22,7 @@ static PATH: OnceLock<PathBuf> = OnceLock::new();
 fuzz_target!(|data: &[u8]| {
     // A material library next to the input, so `mtllib x.mtl` lines can resolve.
     let path = PATH.get_or_init(|| {
-        tempfile::input_path("obj", "obj", &[("x.mtl", include_bytes!("../../formats/tests/data/two_objects.mtl"))])
+        tempfile::input_path("obj", "obj", &[("x.mtl", include_bytes!("../../formats/import/tests/data/two_objects.mtl"))])
     });
     tempfile::write(path, data);
     let whole = import_file(path, &LIMITS);

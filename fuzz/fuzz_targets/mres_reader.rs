@@ -6,7 +6,7 @@
 //! past the checksums see `mres_reader_resealed`.
 #![no_main]
 
-use formats::mres::MresFile;
+use mres_format::MresFile;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

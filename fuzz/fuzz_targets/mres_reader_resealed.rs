@@ -8,7 +8,7 @@
 #[path = "reseal.rs"]
 mod reseal;
 
-use formats::mres::{uniform_cut, view_cut, MresFile, ViewParams};
+use mres_format::{uniform_cut, view_cut, MresFile, ViewParams};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

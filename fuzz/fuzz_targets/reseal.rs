@@ -4,7 +4,7 @@
 //! field or cluster byte reaches the reader's consistency checks instead of being stopped by
 //! blake3 or zstd. Offsets follow `docs/FORMAT.md` (header fields at fixed positions).
 
-use formats::mres::{HEADER_SIZE, PAGE_RECORD_SIZE};
+use mres_format::{HEADER_SIZE, PAGE_RECORD_SIZE};
 
 const PAGE_COUNT_AT: usize = 68;
 const HIERARCHY_OFFSET_AT: usize = 80;

@@ -1,4 +1,4 @@
-//! The importers only take a path (`formats::import::import_file`; the in-memory
+//! The importers only take a path (`mres_import::import_file`; the in-memory
 //! `import_bytes` is private), so each input is written to one reused file in a directory of
 //! its own per process: `<base>/mres-fuzz-<pid>/<subdir>/input.<ext>`, removed at exit.
 //!

@@ -2,7 +2,7 @@
 //! with an infinite far plane, Vulkan clip space), frustum planes, and the camera sets the
 //! verify mode uses.
 
-use formats::mres::{select::ViewParams, Grid, Sphere};
+use mres_format::{select::ViewParams, Grid, Sphere};
 
 use crate::gpu_types::GpuView;
 

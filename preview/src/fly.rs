@@ -2,7 +2,7 @@
 //! scaled to the model's bounding sphere, turned into the same [`Camera`] the headless renders
 //! and the selection use.
 
-use formats::mres::Sphere;
+use mres_format::Sphere;
 
 use crate::camera::{proj_y, Camera, DEFAULT_FOV_Y};
 

@@ -7,7 +7,7 @@
 use std::collections::HashMap;
 
 use anyhow::{Context as _, Result};
-use formats::mres::{MresFile, NO_GROUP};
+use mres_format::{MresFile, NO_GROUP};
 
 /// One level of the chain: a range of the shared index buffer.
 #[derive(Clone, Copy, Debug, PartialEq)]

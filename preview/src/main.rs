@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context as _, Result};
 use clap::Parser;
-use formats::mres::MresFile;
+use mres_format::MresFile;
 use preview::camera::Camera;
 use preview::gpu_types::FLAG_FRUSTUM_CULL;
 use preview::image::write_png;

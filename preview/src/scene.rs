@@ -3,7 +3,7 @@
 //! of page base offsets.
 
 use anyhow::{bail, Context as _, Result};
-use formats::mres::{Grid, MresFile, Sphere, NO_GROUP};
+use mres_format::{Grid, MresFile, Sphere, NO_GROUP};
 
 use crate::gpu_types::{GpuCluster, GpuLevelBin};
 

@@ -2,7 +2,7 @@
 //!
 //! 1. **Selection.** For many cameras (inside and around the bounds) and several thresholds,
 //!    the GPU-selected cluster set must equal the CPU reference
-//!    (`formats::mres::select::view_cut`) exactly; frustum culling is off for this check. For
+//!    (`mres_format::select::view_cut`) exactly; frustum culling is off for this check. For
 //!    each camera the GPU's projected errors of every cluster are also compared bit for bit
 //!    with `select::projected_error`, which shows any arithmetic drift before it flips a choice.
 //! 2. **Cracks.** From cameras outside the bounds (so outside a closed mesh), the selected cut
@@ -21,8 +21,8 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use formats::mres::select::{projected_error, view_cut};
-use formats::mres::{MresFile, NO_GROUP};
+use mres_format::select::{projected_error, view_cut};
+use mres_format::{MresFile, NO_GROUP};
 use serde_json::{json, Value};
 
 use crate::camera::{crack_eyes, selection_eyes, Camera};
@@ -219,7 +219,7 @@ impl VerifyReport {
     }
 }
 
-fn cpu_projected(file: &MresFile, view: &formats::mres::ViewParams) -> Vec<[f32; 2]> {
+fn cpu_projected(file: &MresFile, view: &mres_format::ViewParams) -> Vec<[f32; 2]> {
     file.clusters
         .iter()
         .map(|c| {

@@ -149,7 +149,7 @@ struct Viewer {
     window: Option<Arc<Window>>,
     renderer: Renderer,
     device: Arc<Device>,
-    scene_grid: formats::mres::Grid,
+    scene_grid: mres_format::Grid,
     cluster_count: u32,
     start: FlyCamera,
     fly: FlyCamera,

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use formats::mres::{write_mres, Dag, DagCluster, Grid, Group, Header, MresFile, Sphere, UvQuant, NO_GROUP};
+use mres_format::{write_mres, Dag, DagCluster, Grid, Group, Header, MresFile, Sphere, UvQuant, NO_GROUP};
 use preview::camera::Camera;
 use preview::gpu_types::{FLAG_DROP_SOME, FLAG_FRUSTUM_CULL, MODE_CLUSTER, MODE_LEVEL, MODE_SHADED};
 use preview::image::{count_flagged, count_model};

@@ -9,10 +9,13 @@ use anyhow::{Context as _, Result};
 use ash::vk;
 
 use super::context::Device;
-use super::renderer::{COLOR_FORMAT, DEPTH_FORMAT};
 use super::resources::{
     Buffer, CommandPool, DescriptorPool, DescriptorSetLayout, Fence, Pipeline, PipelineLayout, QueryPool, ShaderModule,
 };
+
+/// Colour attachment format; the read-back bytes are RGBA8.
+pub const COLOR_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
+pub(crate) const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 
 /// One descriptor set of whole buffers, visible to every stage, and the pipeline layout made of
 /// it. Binding 0 is the view (a uniform buffer, shaders/common.glsl), every other one a storage

@@ -11,6 +11,7 @@ use bytemuck::{bytes_of, cast_slice};
 use super::context::Device;
 use super::swapchain::{AcquiredImage, Swapchain};
 use super::pipelines::{compute_pipeline, draw_pipeline, Commands, Descriptors};
+pub use super::pipelines::{COLOR_FORMAT, DEPTH_FORMAT};
 use super::resources::{subresource_range, Buffer, Image, Location, Pipeline};
 use crate::gpu_types::{
     GpuCounters, GpuView, DISPATCH_ARGS_OFFSET, DRAW_ARGS_OFFSET, MESH_ARGS_OFFSET, SELECT_ARGS_OFFSET,
@@ -26,9 +27,6 @@ const DRAW_FRAG_SPV: &[u8] = include_bytes!("../../shaders/draw.frag.spv");
 const DRAW_TASK_SPV: &[u8] = include_bytes!("../../shaders/draw.task.spv");
 const DRAW_MESH_SPV: &[u8] = include_bytes!("../../shaders/draw.mesh.spv");
 
-/// Colour attachment format; the read-back bytes are RGBA8.
-pub const COLOR_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
-pub(crate) const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 /// Background colour (never pure red).
 pub const CLEAR_RGBA: [f32; 4] = [0.16, 0.18, 0.22, 1.0];
 const CULL_GROUP_SIZE: u32 = 64;

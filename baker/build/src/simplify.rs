@@ -1,0 +1,320 @@
+//! Simplify: reduce one group to about half its triangles with its border locked
+//! (meshopt `simplify_with_attributes_and_locks`, absolute error, normals and UVs weighted),
+//! with a permissive and then a sloppy fallback when the group is stuck (as clusterlod does).
+
+use mres_geom::parts::{diagonals, UnionFind};
+use crate::settings::BakeSettings;
+use crate::weld::WeldedMesh;
+use meshopt::{SimplifyOptions, VertexDataAdapter};
+
+/// Which simplifier produced a group's result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Method {
+    /// Attribute-aware edge collapse that respects seams.
+    Regular,
+    /// Edge collapse allowed across attribute seams.
+    Permissive,
+    /// Whole small components removed (`meshopt_simplifyPrune`), for groups of many
+    /// disconnected parts that cannot be simplified one by one (closed boxes, cards).
+    Prune,
+    /// Vertex clustering (topology not preserved), locks respected.
+    Sloppy,
+}
+
+/// A group's simplified triangles, in the mesh's vertex ids.
+pub struct Simplified {
+    /// Triangle list into the welded mesh's vertices.
+    pub indices: Vec<u32>,
+    /// Object-space error meshopt reports for the collapse sequence.
+    pub error: f32,
+    /// The simplifier that reached the target.
+    pub method: Method,
+}
+
+/// Sloppy simplification estimates its error loosely; scale it (clusterlod does the same).
+const SLOPPY_ERROR_FACTOR: f32 = 2.0;
+
+/// Attempts per method: after a result breaks the border or makes a non-manifold edge, the
+/// offending positions are locked and the method runs again.
+const REPAIR_ATTEMPTS: usize = 4;
+
+/// Simplifies the triangle list `indices` (welded vertex ids) with every vertex for which
+/// `locked` is true kept in place; `special` lists the original's open and non-manifold edges. `None` when no simplifier gets below the stuck ratio with
+/// the group's border intact and its interior manifold.
+pub fn simplify_group(
+    mesh: &WeldedMesh,
+    indices: &[u32],
+    locked: impl Fn(u32) -> bool,
+    special: &[(u64, u32)],
+    settings: &BakeSettings,
+) -> Option<Simplified> {
+    // Compact the group's vertices so that each group works on a small, local vertex array.
+    let mut vertices: Vec<u32> = indices.to_vec();
+    vertices.sort_unstable();
+    vertices.dedup();
+    let local: Vec<u32> = indices.iter().map(|v| vertices.binary_search(v).unwrap_or(0) as u32).collect();
+    let positions: Vec<[f32; 3]> = vertices.iter().map(|&v| mesh.positions[v as usize]).collect();
+    let (attributes, weights) = attributes(mesh, &vertices, settings);
+    let bytes = meshopt::typed_to_bytes(&positions);
+    let adapter = VertexDataAdapter::new(bytes, 12, 0).ok()?;
+    let triangles = indices.len() / 3;
+    let group = Group {
+        mesh,
+        vertices: &vertices,
+        local: &local,
+        positions: &positions,
+        adapter: &adapter,
+        attributes: &attributes,
+        weights: &weights,
+        limit: (triangles as f32 * settings.stuck_ratio) as usize,
+        border: EdgeCounts::border(mesh, indices, special),
+    };
+    for method in [Method::Regular, Method::Permissive, Method::Prune, Method::Sloppy] {
+        if method == Method::Permissive && weights.is_empty() {
+            continue; // without attributes there are no seams to relax
+        }
+        let mut locks: Vec<bool> = vertices.iter().map(|&v| locked(v)).collect();
+        let mut ratio = settings.simplify_ratio;
+        for _ in 0..REPAIR_ATTEMPTS {
+            let target = ((triangles as f32 * ratio) as usize).max(1) * 3;
+            let Some((out, error)) = group.run(method, &locks, target) else { break };
+            if out.is_empty() || out.len() / 3 > group.limit || !error.is_finite() {
+                break;
+            }
+            match group.border.check(mesh, &out) {
+                Ok(()) => return Some(Simplified { indices: out, error, method }),
+                Err(bad) => {
+                    // Lock the offending edges' ends and their neighbours, and aim a little
+                    // less low: such pinches come from the last collapses.
+                    let mut lock_positions: Vec<u32> = bad.iter().flat_map(|&e| [(e >> 32) as u32, e as u32]).collect();
+                    lock_positions.sort_unstable();
+                    let ring: Vec<u32> = indices
+                        .chunks_exact(3)
+                        .filter(|t| {
+                            t.iter().any(|&v| lock_positions.binary_search(&mesh.position_ids[v as usize]).is_ok())
+                        })
+                        .flatten()
+                        .map(|&v| mesh.position_ids[v as usize])
+                        .collect();
+                    lock_positions.extend(ring);
+                    lock_positions.sort_unstable();
+                    for (v, lock) in vertices.iter().zip(&mut locks) {
+                        *lock |= lock_positions.binary_search(&mesh.position_ids[*v as usize]).is_ok();
+                    }
+                    ratio = (ratio + 0.1).min(settings.stuck_ratio - 0.05);
+                }
+            }
+        }
+    }
+    None
+}
+
+/// One group's simplification inputs.
+struct Group<'a> {
+    mesh: &'a WeldedMesh,
+    /// Local vertex → mesh vertex.
+    vertices: &'a [u32],
+    /// Triangle list in local vertices.
+    local: &'a [u32],
+    positions: &'a [[f32; 3]],
+    adapter: &'a VertexDataAdapter<'a>,
+    attributes: &'a [f32],
+    weights: &'a [f32],
+    /// Most triangles a result may keep and still count as progress.
+    limit: usize,
+    border: EdgeCounts,
+}
+
+impl Group<'_> {
+    /// Runs `method` with `locks`; returns the result in mesh vertex ids without triangles
+    /// degenerate by position, and its object-space error.
+    fn run(&self, method: Method, locks: &[bool], target: usize) -> Option<(Vec<u32>, f32)> {
+        let (local, adapter) = (self.local, self.adapter);
+        let stride = self.weights.len() * 4;
+        let base = SimplifyOptions::LockBorder | SimplifyOptions::ErrorAbsolute;
+        let mut error = 0.0f32;
+        let result = match method {
+            Method::Regular | Method::Permissive => {
+                let options = if method == Method::Permissive { base | SimplifyOptions::Permissive } else { base };
+                meshopt::simplify_with_attributes_and_locks(
+                    local,
+                    adapter,
+                    self.attributes,
+                    self.weights,
+                    stride,
+                    locks,
+                    target,
+                    f32::MAX,
+                    options,
+                    Some(&mut error),
+                )
+            }
+            Method::Prune => {
+                let (r, e) = prune_components(local, self.positions, locks, self.vertices, self.mesh, target);
+                error = e;
+                r
+            }
+            Method::Sloppy => {
+                let r = meshopt::simplify_sloppy_with_locks(local, adapter, locks, target, f32::MAX, Some(&mut error));
+                // Sloppy error is relative to the group's extent.
+                error *= meshopt::simplify_scale(adapter) * SLOPPY_ERROR_FACTOR;
+                r
+            }
+        };
+        let mut out = Vec::with_capacity(result.len());
+        for t in result.chunks_exact(3) {
+            let g = [self.vertices[t[0] as usize], self.vertices[t[1] as usize], self.vertices[t[2] as usize]];
+            let p = g.map(|v| self.mesh.position_ids[v as usize]);
+            if p[0] != p[1] && p[1] != p[2] && p[0] != p[2] {
+                out.extend_from_slice(&g);
+            }
+        }
+        Some((out, error))
+    }
+}
+
+/// Edge use counts by position, to check that a simplified group keeps its border exactly
+/// and has no hole inside: the local form of the crack-freedom invariant.
+struct EdgeCounts {
+    /// Sorted (edge, uses) of the input's edges not used exactly twice.
+    border: Vec<(u64, u32)>,
+    /// The original's open and non-manifold edges, sorted: an output must not create one
+    /// (another group may already use it, and together they would break its count).
+    special: Vec<u64>,
+}
+
+fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
+    mres_geom::edges::sorted_edge_keys(indices, |v| mesh.position_ids[v as usize])
+}
+
+impl EdgeCounts {
+    /// Odd counts mark the group's border (shared with the rest of the mesh, or the original's
+    /// open edges); the original's open and non-manifold edges (`special`, sorted) are kept too.
+    /// Other edges are interior and free to change.
+    fn border(mesh: &WeldedMesh, indices: &[u32], special: &[(u64, u32)]) -> EdgeCounts {
+        let keys = edge_keys(mesh, indices);
+        let is_special = |k: u64| special.binary_search_by_key(&k, |e| e.0).is_ok();
+        let border = keys
+            .chunk_by(|a, b| a == b)
+            .filter(|r| r.len() % 2 == 1 || is_special(r[0]))
+            .map(|r| (r[0], r.len() as u32))
+            .collect();
+        EdgeCounts { border, special: special.iter().map(|e| e.0).collect() }
+    }
+
+    /// `Ok` if `out` uses every border edge as often as the input and every other edge an even
+    /// number of times (twice, or four times where a thin part pinches into one edge); otherwise
+    /// the offending edges (including border edges it lost). An odd count is a hole or a
+    /// T-junction.
+    fn check(&self, mesh: &WeldedMesh, out: &[u32]) -> Result<(), Vec<u64>> {
+        let keys = edge_keys(mesh, out);
+        let mut bad = Vec::new();
+        let mut seen = vec![false; self.border.len()];
+        for run in keys.chunk_by(|a, b| a == b) {
+            match self.border.binary_search_by_key(&run[0], |e| e.0) {
+                Ok(i) => {
+                    seen[i] = true;
+                    if self.border[i].1 != run.len() as u32 {
+                        bad.push(run[0]);
+                    }
+                }
+                Err(_) if run.len() % 2 != 0 || self.special.binary_search(&run[0]).is_ok() => bad.push(run[0]),
+                Err(_) => {}
+            }
+        }
+        bad.extend(self.border.iter().zip(&seen).filter(|(_, s)| !**s).map(|(e, _)| e.0));
+        if bad.is_empty() {
+            Ok(())
+        } else {
+            Err(bad)
+        }
+    }
+}
+
+/// Per-vertex attribute rows (normal xyz, uv normalized to the mesh's UV range) and weights.
+fn attributes(mesh: &WeldedMesh, vertices: &[u32], settings: &BakeSettings) -> (Vec<f32>, Vec<f32>) {
+    let mut weights = Vec::new();
+    if mesh.normals.is_some() && settings.normal_weight > 0.0 {
+        weights.extend_from_slice(&[settings.normal_weight; 3]);
+    }
+    if mesh.uvs.is_some() && settings.uv_weight > 0.0 {
+        weights.extend_from_slice(&[settings.uv_weight; 2]);
+    }
+    let mut rows = Vec::with_capacity(vertices.len() * weights.len());
+    if weights.is_empty() {
+        return (rows, weights);
+    }
+    for &v in vertices {
+        if let (Some(n), true) = (&mesh.normals, settings.normal_weight > 0.0) {
+            rows.extend_from_slice(&n[v as usize]);
+        }
+        if let (Some(uv), true) = (&mesh.uvs, settings.uv_weight > 0.0) {
+            let t = uv[v as usize];
+            let scale = |k: usize| {
+                if mesh.uv.extent[k] > 0.0 {
+                    (t[k] - mesh.uv.min[k]) / mesh.uv.extent[k]
+                } else {
+                    0.0
+                }
+            };
+            rows.extend_from_slice(&[scale(0), scale(1)]);
+        }
+    }
+    (rows, weights)
+}
+
+/// Removes whole connected components without locked vertices, smallest first, until at most
+/// `target` indices remain. The error is the largest removed component's bounding diagonal:
+/// a part vanishes only once it projects below the threshold.
+fn prune_components(
+    local: &[u32],
+    positions: &[[f32; 3]],
+    locks: &[bool],
+    vertices: &[u32],
+    mesh: &WeldedMesh,
+    target: usize,
+) -> (Vec<u32>, f32) {
+    // Components by position: union vertices of each triangle, and vertices sharing a position.
+    let n = positions.len();
+    let mut sets = UnionFind::new(n);
+    for t in local.chunks_exact(3) {
+        sets.union(t[0], t[1]);
+        sets.union(t[1], t[2]);
+    }
+    let mut by_position: Vec<(u32, u32)> =
+        (0..n as u32).map(|v| (mesh.position_ids[vertices[v as usize] as usize], v)).collect();
+    by_position.sort_unstable();
+    for run in by_position.chunk_by(|a, b| a.0 == b.0) {
+        for w in run.windows(2) {
+            sets.union(w[0].1, w[1].1);
+        }
+    }
+    let root: Vec<u32> = (0..n as u32).map(|v| sets.find(v)).collect();
+    // Per component: bounds, triangle count, locked.
+    let diagonal = diagonals(&mut sets, positions.iter().enumerate().map(|(v, p)| (v as u32, p.map(f64::from))));
+    let diagonal = |r: usize| diagonal[r] as f32;
+    let mut locked = vec![false; n];
+    let mut triangles = vec![0usize; n];
+    for v in 0..n {
+        locked[root[v] as usize] |= locks[v];
+    }
+    for t in local.chunks_exact(3) {
+        triangles[root[t[0] as usize] as usize] += 1;
+    }
+    let mut candidates: Vec<usize> = (0..n).filter(|&r| triangles[r] > 0 && !locked[r]).collect();
+    candidates.sort_by(|&a, &b| diagonal(a).total_cmp(&diagonal(b)).then(a.cmp(&b)));
+    let mut removed = vec![false; n];
+    let mut remaining = local.len();
+    let mut error = 0.0f32;
+    for r in candidates {
+        // Keep at least one component: a group never vanishes entirely.
+        if remaining <= target || remaining == triangles[r] * 3 {
+            break;
+        }
+        removed[r] = true;
+        remaining -= triangles[r] * 3;
+        error = error.max(diagonal(r));
+    }
+    let kept = local.chunks_exact(3).filter(|t| !removed[root[t[0] as usize] as usize]).flatten().copied().collect();
+    (kept, error)
+}

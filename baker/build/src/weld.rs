@@ -1,0 +1,234 @@
+//! Weld: quantize positions to the global grid and merge vertices that are equal in every
+//! attribute (position, normal, UV, material). Vertices equal in position only stay apart
+//! (attribute seams) but share a *position id*, which is what locking and crack checks use.
+
+use crate::settings::BakeSettings;
+use mres_format::{Grid, UvQuant};
+use mres_import::SourceMesh;
+use rayon::prelude::*;
+
+/// A welded, quantized mesh: the input of the DAG build.
+pub struct WeldedMesh {
+    /// The global grid.
+    pub grid: Grid,
+    /// UV quantization (identity-like when the mesh has no UVs).
+    pub uv: UvQuant,
+    /// Grid coordinates per vertex.
+    pub grid_positions: Vec<[i32; 3]>,
+    /// Decoded (snapped) position per vertex: what simplification sees.
+    pub positions: Vec<[f32; 3]>,
+    /// Position id per vertex: vertices at the same grid point share it.
+    pub position_ids: Vec<u32>,
+    /// Number of distinct position ids.
+    pub position_count: usize,
+    /// Unit normals per vertex, if kept.
+    pub normals: Option<Vec<[f32; 3]>>,
+    /// UVs per vertex, if kept.
+    pub uvs: Option<Vec<[f32; 2]>>,
+    /// Material per vertex (a vertex never spans two materials).
+    pub materials: Vec<u32>,
+    /// Whether more than one material occurs.
+    pub multi_material: bool,
+    /// Triangle list into the vertex arrays.
+    pub indices: Vec<u32>,
+    /// Triangles dropped because they became degenerate on the grid (plus the importer's).
+    pub degenerate_dropped: u64,
+    /// Triangles of the source.
+    pub source_triangles: u64,
+}
+
+/// Welds `mesh` on a grid of `settings.position_bits` over its bounds. `None` if the mesh is
+/// empty.
+pub fn weld(mesh: &SourceMesh, settings: &BakeSettings) -> Option<WeldedMesh> {
+    let (lo, hi) = mesh.bounds()?;
+    let grid = Grid::covering(lo, hi, settings.position_bits);
+    let uvs = mesh.uvs.as_ref().filter(|_| settings.keep_uvs);
+    let uv = uv_quant(uvs.map(|v| v.as_slice()).unwrap_or(&[]));
+    Some(weld_on(mesh, settings, grid, uv))
+}
+
+/// [`weld`] on a given grid and UV quantization (a shard of a larger mesh uses the whole
+/// mesh's, so that shards meet exactly).
+pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQuant) -> WeldedMesh {
+    let normals = mesh.normals.as_ref().filter(|_| settings.keep_normals);
+    let uvs = mesh.uvs.as_ref().filter(|_| settings.keep_uvs);
+
+    // Welding units: source vertices, or (source vertex, material) pairs when a vertex can be
+    // used by triangles of several materials (a vertex never spans two materials).
+    let first_material = mesh.materials.first().copied().unwrap_or(0);
+    let multi_material = mesh.materials.par_iter().any(|&m| m != first_material);
+    let units: Vec<(u32, u32)> = if multi_material {
+        let mut corners: Vec<(u32, u32)> =
+            mesh.indices.par_iter().enumerate().map(|(i, &v)| (v, mesh.materials[i / 3])).collect();
+        corners.par_sort_unstable();
+        corners.dedup();
+        corners
+    } else {
+        (0..mesh.positions.len() as u32).map(|v| (v, first_material)).collect()
+    };
+    // Key: grid point, quantized attributes, material. Attributes are compared after
+    // quantization so that vertices that encode identically also weld. Sorting by key (ties
+    // by unit) makes the numbering deterministic and puts equal grid points next to each other.
+    type Key = ([i32; 3], [u32; 2], [u16; 2], u32);
+    let mut keyed: Vec<(Key, u32)> = units
+        .par_iter()
+        .enumerate()
+        .map(|(i, &(src, material))| {
+            let s = src as usize;
+            let q = grid.quantize(mesh.positions[s]);
+            let n = normals.map(|n| mres_format::bits::oct_encode(n[s], settings.normal_bits)).unwrap_or([0; 2]);
+            let t = uvs.map(|u| uv.quantize(u[s])).unwrap_or([0; 2]);
+            ((q, n, t, material), i as u32)
+        })
+        .collect();
+    keyed.par_sort_unstable();
+
+    let mut out = WeldedMesh {
+        grid,
+        uv,
+        grid_positions: Vec::new(),
+        positions: Vec::new(),
+        position_ids: Vec::new(),
+        position_count: 0,
+        normals: normals.map(|_| Vec::new()),
+        uvs: uvs.map(|_| Vec::new()),
+        materials: Vec::new(),
+        multi_material,
+        indices: Vec::new(),
+        degenerate_dropped: mesh.degenerate_dropped,
+        source_triangles: mesh.triangle_count() as u64 + mesh.degenerate_dropped,
+    };
+    let mut unit_vertex = vec![0u32; units.len()];
+    let mut previous_q = None;
+    for run in keyed.chunk_by(|a, b| a.0 == b.0) {
+        let ((q, _, _, material), first) = run[0];
+        let s = units[first as usize].0 as usize;
+        let vertex = out.grid_positions.len() as u32;
+        if previous_q != Some(q) {
+            out.position_count += 1;
+            previous_q = Some(q);
+        }
+        out.grid_positions.push(q);
+        out.positions.push(grid.decode(q));
+        out.position_ids.push(out.position_count as u32 - 1);
+        if let (Some(dst), Some(src)) = (out.normals.as_mut(), normals) {
+            dst.push(src[s]);
+        }
+        if let (Some(dst), Some(src)) = (out.uvs.as_mut(), uvs) {
+            dst.push(src[s]);
+        }
+        out.materials.push(material);
+        for &(_, unit) in run {
+            unit_vertex[unit as usize] = vertex;
+        }
+    }
+    drop(keyed);
+
+    let vertex_of = |corner: usize| -> u32 {
+        let src = mesh.indices[corner];
+        if multi_material {
+            let unit = units.binary_search(&(src, mesh.materials[corner / 3])).unwrap_or(0);
+            unit_vertex[unit]
+        } else {
+            unit_vertex[src as usize]
+        }
+    };
+    let triangles: Vec<Option<[u32; 3]>> = (0..mesh.triangle_count())
+        .into_par_iter()
+        .map(|t| {
+            let welded = [vertex_of(3 * t), vertex_of(3 * t + 1), vertex_of(3 * t + 2)];
+            let p = welded.map(|v| out.position_ids[v as usize]);
+            (p[0] != p[1] && p[1] != p[2] && p[0] != p[2]).then_some(welded)
+        })
+        .collect();
+    out.indices = triangles.iter().flatten().flatten().copied().collect();
+    out.degenerate_dropped += triangles.iter().filter(|t| t.is_none()).count() as u64;
+    out
+}
+
+/// The UV quantization covering `uvs`.
+pub fn uv_quant(uvs: &[[f32; 2]]) -> UvQuant {
+    let mut min = [f32::INFINITY; 2];
+    let mut max = [f32::NEG_INFINITY; 2];
+    for uv in uvs {
+        for k in 0..2 {
+            min[k] = min[k].min(uv[k]);
+            max[k] = max[k].max(uv[k]);
+        }
+    }
+    if uvs.is_empty() {
+        return UvQuant { min: [0.0; 2], extent: [0.0; 2] };
+    }
+    UvQuant { min, extent: [max[0] - min[0], max[1] - min[1]] }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seams_stay_apart_but_share_position_ids() {
+        // Two triangles sharing an edge, with different UVs on the shared vertices.
+        let mesh = SourceMesh {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+            ],
+            uvs: Some(vec![[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.6, 0.0], [0.0, 0.6], [1.0, 1.0]]),
+            normals: None,
+            indices: vec![0, 1, 2, 3, 5, 4],
+            materials: vec![0, 0],
+            degenerate_dropped: 0,
+        };
+        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        assert_eq!(w.grid_positions.len(), 6);
+        assert_eq!(w.position_count, 4);
+        // Vertices share a position id exactly when they share a grid point.
+        for a in 0..6 {
+            for b in 0..6 {
+                assert_eq!(w.position_ids[a] == w.position_ids[b], w.grid_positions[a] == w.grid_positions[b]);
+            }
+        }
+        // The shared edge (1,0,0)-(0,1,0) is used by both triangles through different vertices.
+        let pos = |t: usize, k: usize| w.position_ids[w.indices[3 * t + k] as usize];
+        let edge = |t: usize| [pos(t, 0), pos(t, 1), pos(t, 2)];
+        let shared = edge(0).iter().filter(|p| edge(1).contains(p)).count();
+        assert_eq!(shared, 2);
+    }
+
+    #[test]
+    fn materials_split_vertices() {
+        let mesh = SourceMesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]],
+            indices: vec![0, 1, 2, 1, 3, 2],
+            materials: vec![0, 1],
+            ..Default::default()
+        };
+        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        assert!(w.multi_material);
+        assert_eq!(w.grid_positions.len(), 6, "the two shared vertices are split by material");
+        assert_eq!(w.position_count, 4);
+        for t in 0..2 {
+            let m: Vec<u32> = w.indices[3 * t..3 * t + 3].iter().map(|&v| w.materials[v as usize]).collect();
+            assert!(m.iter().all(|&x| x == t as u32));
+        }
+    }
+
+    #[test]
+    fn duplicates_weld_and_grid_degenerates_drop() {
+        let mesh = SourceMesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [1e-9, 0.0, 0.0]],
+            indices: vec![0, 1, 2, 3, 2, 0, 0, 4, 2],
+            materials: vec![0, 0, 0],
+            ..Default::default()
+        };
+        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        assert_eq!(w.grid_positions.len(), 3);
+        assert_eq!(w.indices.len(), 6);
+        assert_eq!(w.degenerate_dropped, 1);
+    }
+}

@@ -1,0 +1,186 @@
+//! DESIGN.md invariant 4, honest errors: a cluster drawn in a cut stands in for the original
+//! surface under it, and its own group's stored error must bound how far apart the two are.
+//!
+//! For a few uniform cuts (thresholds at quantiles of the stored errors), points are sampled
+//! on the cut and on the level-0 surface and the two-sided distance is measured with a
+//! bounding-volume hierarchy: a point on a drawn cluster is compared with that cluster's own
+//! error; a point on the original surface with the largest own error among the drawn clusters
+//! that replace its level-0 cluster (its drawn ancestors), whichever drawn cluster is nearest
+//! to it. The worst and 99th-percentile ratios are reported.
+
+use mres_geom::bvh::Bvh;
+use mres_geom::parts::{diagonals, UnionFind};
+use mres_format::{select, DecodedCluster, MresFile, NO_GROUP};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// Honesty figures.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Honesty {
+    /// Cuts measured.
+    pub cuts: u64,
+    /// Points measured (both directions, all cuts).
+    pub samples: u64,
+    /// Largest distance / stored own error.
+    pub worst_ratio: f64,
+    /// 99th percentile of the same.
+    pub p99_ratio: f64,
+    /// Where the worst ratio was found.
+    pub worst: String,
+}
+
+/// A triangle soup with, per triangle, the cluster it came from.
+struct Soup {
+    tris: Vec<[[f64; 3]; 3]>,
+    cluster: Vec<u32>,
+}
+
+fn soup(file: &MresFile, decoded: &[DecodedCluster], clusters: impl Iterator<Item = u32>) -> Soup {
+    let mut s = Soup { tris: Vec::new(), cluster: Vec::new() };
+    for c in clusters {
+        let d = &decoded[c as usize];
+        let p: Vec<[f64; 3]> = d.positions.iter().map(|q| file.header.grid.decode(*q).map(|v| v as f64)).collect();
+        for t in d.indices.chunks_exact(3) {
+            s.tris.push([p[t[0] as usize], p[t[1] as usize], p[t[2] as usize]]);
+            s.cluster.push(c);
+        }
+    }
+    s
+}
+
+/// Deterministic sample points: every triangle's centroid and edge midpoints, thinned to at
+/// most `max` points (triangle order, even stride).
+fn samples(s: &Soup, max: usize) -> Vec<([f64; 3], u32, usize)> {
+    let stride = (s.tris.len() * 4).div_ceil(max.max(1)).max(1);
+    let mut out = Vec::new();
+    for (i, t) in s.tris.iter().enumerate() {
+        let mid = |a: [f64; 3], b: [f64; 3]| [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0, (a[2] + b[2]) / 2.0];
+        let c = [
+            (t[0][0] + t[1][0] + t[2][0]) / 3.0,
+            (t[0][1] + t[1][1] + t[2][1]) / 3.0,
+            (t[0][2] + t[1][2] + t[2][2]) / 3.0,
+        ];
+        for (k, p) in [c, mid(t[0], t[1]), mid(t[1], t[2]), mid(t[2], t[0])].into_iter().enumerate() {
+            if (i * 4 + k) % stride == 0 {
+                out.push((p, s.cluster[i], i));
+            }
+        }
+    }
+    out
+}
+
+/// Measures honesty on `cuts` uniform cuts with about `samples_per_cut` points each way.
+pub fn measure(file: &MresFile, decoded: &[DecodedCluster], cuts: usize, samples_per_cut: usize) -> Honesty {
+    let groups = &file.groups;
+    let own_error = |c: u32| match file.clusters[c as usize].own_group {
+        NO_GROUP => 0.0,
+        g => groups[g as usize].error as f64,
+    };
+    let level0 = soup(
+        file,
+        decoded,
+        (0..file.clusters.len() as u32).filter(|&c| file.clusters[c as usize].own_group == NO_GROUP),
+    );
+    let level0_bvh = Bvh::new(&level0.tris);
+    let part_size = component_diagonals(&level0.tris);
+    let mut errors: Vec<f32> = groups.iter().map(|g| g.error).filter(|e| e.is_finite() && *e > 0.0).collect();
+    errors.sort_by(f32::total_cmp);
+    errors.dedup();
+    let thresholds: Vec<f32> = (1..=cuts).filter_map(|i| errors.get(i * errors.len() / (cuts + 1)).copied()).collect();
+    // Distances below this are grid rounding, not simplification.
+    let floor = file.header.grid.step as f64;
+    let mut ratios: Vec<(f64, String)> = Vec::new();
+    let mut out = Honesty::default();
+    for &t in &thresholds {
+        let cut = select::uniform_cut(groups, &file.clusters, t);
+        let cut_soup = soup(file, decoded, cut.iter().copied());
+        let cut_bvh = Bvh::new(&cut_soup.tris);
+        // Cut → original: compare with the drawn cluster's own error.
+        let forward: Vec<(f64, String)> = samples(&cut_soup, samples_per_cut)
+            .par_iter()
+            .map(|(p, c, _)| {
+                let d = level0_bvh.distance(&level0.tris, *p);
+                (
+                    ratio(d, own_error(*c), floor),
+                    format!("cut at {t}: point {p:?} on cluster {c} is {d:.3e} from the original"),
+                )
+            })
+            .collect();
+        // Original → cut: compare with the largest own error among the drawn clusters that
+        // replace the sampled level-0 cluster (its drawn ancestors).
+        let bound = drawn_ancestor_error(file, &cut, &own_error);
+        let backward: Vec<(f64, String)> = samples(&level0, samples_per_cut)
+            .par_iter()
+            .map(|(p, l, tri)| {
+                // A part that vanished entirely is off by at most its own size on screen.
+                let d = cut_bvh.distance(&cut_soup.tris, *p).min(part_size[*tri]);
+                let e = bound[*l as usize];
+                (ratio(d, e, floor), format!("cut at {t}: original point {p:?} of cluster {l} is {d:.3e} from the cut, whose clusters there claim {e:.3e}"))
+            })
+            .collect();
+        out.cuts += 1;
+        out.samples += (forward.len() + backward.len()) as u64;
+        ratios.extend(forward);
+        ratios.extend(backward);
+    }
+    ratios.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if let Some((worst, at)) = ratios.last() {
+        out.worst_ratio = *worst;
+        out.worst = at.clone();
+        out.p99_ratio = ratios[(ratios.len() * 99 / 100).min(ratios.len() - 1)].0;
+    }
+    out
+}
+
+/// Per triangle, the bounding-box diagonal of its connected component (triangles sharing a
+/// vertex position): when simplification drops a whole small part (a far-away box), the
+/// deviation a viewer sees is the part's size, not its distance to the next surface.
+fn component_diagonals(tris: &[[[f64; 3]; 3]]) -> Vec<f64> {
+    let mut vertex: rustc_hash::FxHashMap<[u64; 3], u32> = rustc_hash::FxHashMap::default();
+    let mut sets = UnionFind::new(0);
+    let ids: Vec<[u32; 3]> =
+        tris.iter().map(|t| t.map(|p| *vertex.entry(p.map(f64::to_bits)).or_insert_with(|| sets.push()))).collect();
+    for t in &ids {
+        sets.union(t[0], t[1]);
+        sets.union(t[0], t[2]);
+    }
+    let diagonal = diagonals(&mut sets, ids.iter().zip(tris).flat_map(|(i, t)| (0..3).map(move |k| (i[k], t[k]))));
+    ids.iter().map(|t| diagonal[sets.find(t[0]) as usize]).collect()
+}
+
+/// Per cluster, the largest own error among the drawn clusters at or above it in the DAG
+/// (following group → outputs upward); the drawn clusters of a valid cut cover every cluster.
+fn drawn_ancestor_error(file: &MresFile, cut: &[u32], own_error: &impl Fn(u32) -> f64) -> Vec<f64> {
+    let n = file.clusters.len();
+    let mut drawn = vec![false; n];
+    for &c in cut {
+        drawn[c as usize] = true;
+    }
+    // Outputs of each group, and clusters in an order where outputs come before members:
+    // clusters are stored coarse to fine, so a reverse-free pass over increasing index works.
+    let mut outputs: Vec<Vec<u32>> = vec![Vec::new(); file.groups.len()];
+    for (c, info) in file.clusters.iter().enumerate() {
+        if info.own_group != NO_GROUP {
+            outputs[info.own_group as usize].push(c as u32);
+        }
+    }
+    let mut bound = vec![0.0f64; n];
+    for c in 0..n {
+        bound[c] = if drawn[c] {
+            own_error(c as u32)
+        } else {
+            outputs[file.clusters[c].group as usize].iter().map(|&o| bound[o as usize]).fold(0.0, f64::max)
+        };
+    }
+    bound
+}
+
+fn ratio(distance: f64, error: f64, floor: f64) -> f64 {
+    if distance <= floor {
+        0.0
+    } else if error <= 0.0 {
+        f64::INFINITY
+    } else {
+        distance / error
+    }
+}

@@ -1,0 +1,214 @@
+//! Generated test meshes: a closed cube-sphere, an open terrain, a field of disconnected boxes.
+//! Used by tests, benchmarks and `mres generate`.
+
+use mres_import::SourceMesh;
+
+fn mesh(positions: Vec<[f32; 3]>, indices: Vec<u32>) -> SourceMesh {
+    let materials = vec![0; indices.len() / 3];
+    SourceMesh { positions, normals: None, uvs: None, indices, materials, degenerate_dropped: 0 }
+}
+
+/// A closed sphere of radius 1 made from a cube with `n`×`n` quads per face (12·n² triangles),
+/// with normals. Vertices on cube edges are generated once, so the mesh is watertight.
+pub fn sphere(n: u32) -> SourceMesh {
+    let n = n.max(1) as i32;
+    let mut index_of = std::collections::HashMap::new();
+    let mut positions = Vec::new();
+    let mut vertex = |p: [i32; 3]| -> u32 {
+        *index_of.entry(p).or_insert_with(|| {
+            let v = [p[0] as f32 / n as f32, p[1] as f32 / n as f32, p[2] as f32 / n as f32];
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            positions.push([v[0] / l, v[1] / l, v[2] / l]);
+            positions.len() as u32 - 1
+        })
+    };
+    let mut indices = Vec::new();
+    for axis in 0..3 {
+        for side in [-n, n] {
+            for i in 0..n {
+                for j in 0..n {
+                    let at = |a: i32, b: i32| {
+                        let mut p = [0; 3];
+                        p[axis] = side;
+                        p[(axis + 1) % 3] = -n + 2 * a;
+                        p[(axis + 2) % 3] = -n + 2 * b;
+                        p
+                    };
+                    let (i, j) = (i, j);
+                    let q = [vertex(at(i, j)), vertex(at(i + 1, j)), vertex(at(i + 1, j + 1)), vertex(at(i, j + 1))];
+                    // Outward winding on both sides.
+                    if side > 0 {
+                        indices.extend_from_slice(&[q[0], q[1], q[2], q[0], q[2], q[3]]);
+                    } else {
+                        indices.extend_from_slice(&[q[0], q[2], q[1], q[0], q[3], q[2]]);
+                    }
+                }
+            }
+        }
+    }
+    let normals = positions.clone();
+    SourceMesh { normals: Some(normals), ..mesh(positions, indices) }
+}
+
+/// The cube-sphere of [`sphere`] with every cube face a separate UV chart and material: the
+/// vertices along the 12 cube edges are duplicated with different UVs (attribute seams), so the
+/// mesh is watertight by position only. 12·n² triangles, 6 materials.
+pub fn seamed_sphere(n: u32) -> SourceMesh {
+    let n = n.max(1) as i32;
+    let (mut positions, mut uvs, mut indices, mut materials) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for face in 0..6 {
+        let (axis, side) = (face / 2, if face % 2 == 0 { -n } else { n });
+        let base = positions.len() as u32;
+        for a in 0..=n {
+            for b in 0..=n {
+                let mut p = [0i32; 3];
+                p[axis] = side;
+                p[(axis + 1) % 3] = -n + 2 * a;
+                p[(axis + 2) % 3] = -n + 2 * b;
+                let v = p.map(|c| c as f32 / n as f32);
+                let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                positions.push([v[0] / l, v[1] / l, v[2] / l]);
+                uvs.push([a as f32 / n as f32, b as f32 / n as f32]);
+            }
+        }
+        let at = |a: i32, b: i32| base + (a * (n + 1) + b) as u32;
+        for a in 0..n {
+            for b in 0..n {
+                let q = [at(a, b), at(a + 1, b), at(a + 1, b + 1), at(a, b + 1)];
+                if side > 0 {
+                    indices.extend_from_slice(&[q[0], q[1], q[2], q[0], q[2], q[3]]);
+                } else {
+                    indices.extend_from_slice(&[q[0], q[2], q[1], q[0], q[3], q[2]]);
+                }
+                materials.extend_from_slice(&[face as u32; 2]);
+            }
+        }
+    }
+    let normals = positions.clone();
+    SourceMesh { positions, normals: Some(normals), uvs: Some(uvs), indices, materials, degenerate_dropped: 0 }
+}
+
+/// An open height-field terrain of `n`×`n` quads (2·n² triangles) over [0, 1]², with UVs.
+pub fn terrain(n: u32) -> SourceMesh {
+    let n = n.max(1);
+    let mut positions = Vec::with_capacity(((n + 1) * (n + 1)) as usize);
+    let mut uvs = Vec::with_capacity(positions.capacity());
+    for y in 0..=n {
+        for x in 0..=n {
+            let (u, v) = (x as f32 / n as f32, y as f32 / n as f32);
+            let h = 0.08 * (u * 9.0).sin() * (v * 7.0).cos()
+                + 0.03 * (u * 31.0 + v * 17.0).sin()
+                + 0.01 * (u * 97.0).cos() * (v * 83.0).sin();
+            positions.push([u, h, v]);
+            uvs.push([u, v]);
+        }
+    }
+    let row = n + 1;
+    let mut indices = Vec::with_capacity((n * n * 6) as usize);
+    for y in 0..n {
+        for x in 0..n {
+            let i = y * row + x;
+            indices.extend_from_slice(&[i, i + row, i + 1, i + 1, i + row, i + row + 1]);
+        }
+    }
+    SourceMesh { uvs: Some(uvs), ..mesh(positions, indices) }
+}
+
+/// `count` disconnected closed boxes on a square grid, each face split into `k`×`k` quads
+/// (12·k² triangles per box; k = 4 gives 192).
+pub fn boxes(count: u32, k: u32) -> SourceMesh {
+    let unit = sphere_free_box(k.max(1));
+    let side = (count as f32).sqrt().ceil() as u32;
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for b in 0..count {
+        let (gx, gz) = ((b % side) as f32 * 2.0, (b / side) as f32 * 2.0);
+        let scale = 0.6 + 0.3 * ((b * 7919) % 13) as f32 / 13.0;
+        let base = positions.len() as u32;
+        positions.extend(unit.positions.iter().map(|p| [gx + p[0] * scale, p[1] * scale, gz + p[2] * scale]));
+        indices.extend(unit.indices.iter().map(|i| base + i));
+    }
+    mesh(positions, indices)
+}
+
+/// A closed unit box from −0.5 to 0.5 with `k`×`k` quads per face.
+fn sphere_free_box(k: u32) -> SourceMesh {
+    let cube = sphere(k);
+    // Project the cube-sphere back onto the cube: same topology, flat faces.
+    let positions = cube
+        .positions
+        .iter()
+        .map(|p| {
+            let m = p[0].abs().max(p[1].abs()).max(p[2].abs());
+            [p[0] / m * 0.5, p[1] / m * 0.5, p[2] / m * 0.5]
+        })
+        .collect();
+    mesh(positions, cube.indices)
+}
+
+/// Foliage-like aggregate geometry: `count` disconnected two-triangle cards (open quads) of
+/// random size and orientation in a unit cube (deterministic).
+pub fn cards(count: u32) -> SourceMesh {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f32 / (1u64 << 53) as f32
+    };
+    let (mut positions, mut indices) = (Vec::new(), Vec::new());
+    for _ in 0..count {
+        let c = [next(), next(), next()];
+        let s = 0.01 + 0.03 * next();
+        let (a, b) = (next() * std::f32::consts::TAU, next() * std::f32::consts::PI);
+        let u = [a.cos() * s, a.sin() * s, 0.0];
+        let v = [0.0, b.cos() * s, b.sin() * s];
+        let base = positions.len() as u32;
+        for (du, dv) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            positions.push([0, 1, 2].map(|k| c[k] + du * u[k] + dv * v[k]));
+        }
+        indices.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+    mesh(positions, indices)
+}
+
+/// The cube-sphere with defects real scans and CAD exports have: every 97th triangle removed
+/// (holes), every 89th duplicated, and a fin of two triangles on one edge per 1,000 triangles
+/// (non-manifold edges used three times).
+pub fn defects(n: u32) -> SourceMesh {
+    let base = sphere(n);
+    let mut positions = base.positions.clone();
+    let mut indices = Vec::new();
+    for (t, tri) in base.indices.chunks_exact(3).enumerate() {
+        if t % 97 == 13 {
+            continue;
+        }
+        indices.extend_from_slice(tri);
+        if t % 89 == 7 {
+            indices.extend_from_slice(tri);
+        }
+        if t % 1000 == 500 {
+            // A fin standing on the edge tri[0]-tri[1].
+            let (a, b) = (positions[tri[0] as usize], positions[tri[1] as usize]);
+            let tip = [0, 1, 2].map(|k| (a[k] + b[k]) * 0.5 * 1.05);
+            positions.push(tip);
+            indices.extend_from_slice(&[tri[0], tri[1], positions.len() as u32 - 1]);
+        }
+    }
+    mesh(positions, indices)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn generated_sizes() {
+        assert_eq!(sphere(10).triangle_count(), 1200);
+        assert_eq!(terrain(10).triangle_count(), 200);
+        assert_eq!(boxes(16, 4).triangle_count(), 16 * 192);
+        let seamed = seamed_sphere(10);
+        assert_eq!(seamed.triangle_count(), 1200);
+        assert_eq!(seamed.positions.len(), 6 * 121);
+    }
+}

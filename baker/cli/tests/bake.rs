@@ -1,0 +1,175 @@
+//! End-to-end bakes (issue #2): generated and real meshes are baked, then proved by the
+//! validator — crack-free cuts at every uniform threshold and at random cameras, monotone
+//! errors, nested spheres, intact pages — with one root.
+
+use mres_build::bake::{bake_file, bake_mesh};
+use mres_cli::generate;
+use mres_check::validate::{validate, Report, ValidateOptions};
+use mres_build::BakeSettings;
+use mres_format::{select, MresFile, NO_GROUP};
+use mres_import::SourceMesh;
+use std::path::{Path, PathBuf};
+
+fn check(bytes: Vec<u8>, random_cuts: usize) -> (MresFile, Report) {
+    let file = MresFile::parse(bytes).expect("baked file parses");
+    let report = validate(&file, &ValidateOptions { random_cuts, ..Default::default() }).expect("pages decode");
+    assert!(report.ok(), "violations: {:#?}", report.violations);
+    assert_eq!(report.root_groups, 1, "one root group");
+    assert!(report.uniform_cuts >= 2 && report.random_cuts == random_cuts as u64);
+    (file, report)
+}
+
+fn bake(mesh: SourceMesh) -> Vec<u8> {
+    bake_mesh(mesh, &BakeSettings::default()).expect("bake").bytes
+}
+
+#[test]
+fn closed_sphere_reaches_one_root_cluster() {
+    let (file, report) = check(bake(generate::sphere(40)), 300);
+    assert_eq!(report.root_clusters, 1);
+    assert!(report.level0_fill >= 120.0, "fill {}", report.level0_fill);
+    assert!(report.levels >= 5);
+    // Triangles halve level by level, roughly.
+    let t: Vec<u64> = report.per_level.iter().map(|l| l.triangles).collect();
+    assert!(t[1] * 10 < t[0] * 6 && t[1] * 10 > t[0] * 4, "level triangles {t:?}");
+    assert_eq!(file.header.source_triangles, 19200);
+}
+
+#[test]
+fn open_terrain_keeps_its_boundary_in_every_cut() {
+    // The validator requires the original's open edges in every cut; check it found them.
+    let (file, _) = check(bake(generate::terrain(100)), 300);
+    let coarsest = select::uniform_cut(&file.groups, &file.clusters, f32::MAX);
+    let triangles: u64 = coarsest.iter().map(|&c| file.clusters[c as usize].triangle_count as u64).sum();
+    // 400 locked boundary edges need at least ~400 triangles; far fewer than 20,000.
+    assert!(triangles >= 398 && triangles < 4000, "coarsest cut has {triangles} triangles");
+}
+
+#[test]
+fn thousand_disconnected_boxes_reach_one_root_cluster() {
+    let (_, report) = check(bake(generate::boxes(1000, 4)), 200);
+    assert_eq!(report.root_clusters, 1);
+    assert!(report.level0_fill >= 120.0, "fill {}", report.level0_fill);
+}
+
+#[test]
+fn uv_seams_and_materials_survive() {
+    let mesh = generate::seamed_sphere(30);
+    let per_material = 2 * 30 * 30;
+    let (file, report) = check(bake(mesh), 200);
+    assert_eq!(report.root_clusters, 1, "seams must not stop simplification");
+    assert_ne!(file.header.flags & mres_format::FLAG_MATERIALS, 0);
+    let decoded = file.decode_all().unwrap();
+    let mut counts = [0usize; 6];
+    for (d, info) in decoded.iter().zip(&file.clusters) {
+        if info.own_group == NO_GROUP {
+            for &m in &d.materials {
+                counts[m as usize] += 1;
+            }
+            assert_eq!(d.uvs.len(), d.positions.len());
+        }
+    }
+    assert_eq!(counts, [per_material; 6]);
+}
+
+/// Writes a glTF with two primitives (a sphere with normals, a terrain with UVs) in one mesh,
+/// instanced by two nodes with different transforms, buffers as a data URI.
+fn write_two_primitive_gltf(dir: &Path) -> PathBuf {
+    use base64::Engine;
+    let a = generate::sphere(8);
+    let b = generate::terrain(16);
+    let mut buffer: Vec<u8> = Vec::new();
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    let mut push =
+        |data: Vec<u8>, count: usize, kind: &str, component: u32, target: u32, minmax: Option<([f32; 3], [f32; 3])>| {
+            let offset = buffer.len();
+            buffer.extend_from_slice(&data);
+            while buffer.len() % 4 != 0 {
+                buffer.push(0);
+            }
+            views
+                .push(format!(r#"{{"buffer":0,"byteOffset":{offset},"byteLength":{},"target":{target}}}"#, data.len()));
+            let bounds = minmax.map_or(String::new(), |(lo, hi)| format!(r#","min":{lo:?},"max":{hi:?}"#));
+            accessors.push(format!(
+                r#"{{"bufferView":{},"componentType":{component},"count":{count},"type":"{kind}"{bounds}}}"#,
+                views.len() - 1
+            ));
+            accessors.len() - 1
+        };
+    let floats = |v: &[[f32; 3]]| v.iter().flatten().flat_map(|f| f.to_le_bytes()).collect::<Vec<u8>>();
+    let ints = |v: &[u32]| v.iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>();
+    let pa = push(floats(&a.positions), a.positions.len(), "VEC3", 5126, 34962, a.bounds());
+    let na = push(floats(a.normals.as_ref().unwrap()), a.positions.len(), "VEC3", 5126, 34962, None);
+    let ia = push(ints(&a.indices), a.indices.len(), "SCALAR", 5125, 34963, None);
+    let pb = push(floats(&b.positions), b.positions.len(), "VEC3", 5126, 34962, b.bounds());
+    let uv: Vec<u8> = b.uvs.as_ref().unwrap().iter().flatten().flat_map(|f| f.to_le_bytes()).collect();
+    let tb = push(uv, b.positions.len(), "VEC2", 5126, 34962, None);
+    let ib = push(ints(&b.indices), b.indices.len(), "SCALAR", 5125, 34963, None);
+    let uri =
+        format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&buffer));
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0,1]}}],
+"nodes":[{{"mesh":0,"translation":[10,0,0],"scale":[2,2,2]}},{{"mesh":0,"translation":[-10,0,0]}}],
+"meshes":[{{"primitives":[{{"attributes":{{"POSITION":{pa},"NORMAL":{na}}},"indices":{ia},"material":0}},
+{{"attributes":{{"POSITION":{pb},"TEXCOORD_0":{tb}}},"indices":{ib},"material":1}}]}}],
+"materials":[{{}},{{}}],
+"buffers":[{{"byteLength":{},"uri":"{uri}"}}],"bufferViews":[{}],"accessors":[{}]}}"#,
+        buffer.len(),
+        views.join(","),
+        accessors.join(",")
+    );
+    let path = dir.join("two_primitives.gltf");
+    std::fs::write(&path, json).unwrap();
+    path
+}
+
+#[test]
+fn gltf_with_two_primitives_and_node_transforms() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_two_primitive_gltf(dir.path());
+    let baked = bake_file(&path, &BakeSettings::default()).expect("bake glTF");
+    assert_eq!(baked.stats.source_triangles, 2 * (768 + 512));
+    let (file, _) = check(baked.bytes, 200);
+    // Instances at x = +10 (scaled 2: sphere radius 2, terrain 0..2) and x = -10.
+    let decoded = file.decode_all().unwrap();
+    let xs: Vec<f32> =
+        decoded.iter().flat_map(|d| d.positions.iter().map(|q| file.header.grid.decode(*q)[0])).collect();
+    let (lo, hi) = xs.iter().fold((f32::MAX, f32::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+    assert!((lo - -11.0).abs() < 1e-3 && (hi - 12.0).abs() < 1e-3, "x range {lo}..{hi}");
+    assert!(xs.iter().all(|&x| x < -8.9 || x > 7.9), "geometry between the instances");
+}
+
+fn asset(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets").join(rel)
+}
+
+#[test]
+fn real_meshes_validate() {
+    for (rel, closed) in [
+        ("scans/nefertiti.glb", true),
+        ("scans/hammer_rawscan.glb", true),
+        ("scans/demosthenes_photoscan.obj", false),
+        ("models/flight_helmet.glb", false),
+    ] {
+        let baked = bake_file(&asset(rel), &BakeSettings::default()).unwrap_or_else(|e| panic!("{rel}: {e}"));
+        let (_, report) = check(baked.bytes, 200);
+        if closed {
+            assert_eq!(report.root_clusters, 1, "{rel}");
+        }
+        assert!(report.level0_fill >= 115.0, "{rel}: fill {}", report.level0_fill);
+    }
+}
+
+#[test]
+fn output_is_identical_for_any_thread_count() {
+    let path = asset("models/flight_helmet.glb");
+    let bake_with = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| bake_file(&path, &BakeSettings::default()).unwrap().bytes)
+    };
+    let one = bake_with(1);
+    assert_eq!(one, bake_with(2));
+    assert_eq!(one, bake_with(4));
+    assert_eq!(one, bake_with(1), "repeat run");
+}

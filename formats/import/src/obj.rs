@@ -1,0 +1,274 @@
+//! Wavefront OBJ importer: a validating scan of the text, then `tobj` for the parse.
+//!
+//! `tobj` 4 trusts its input in ways that matter here, so [`scan`] runs first over the same
+//! lines, tokenised the same way, and:
+//! - checks every face index (0, or past the end, or a relative index reaching before the
+//!   first element) — `tobj` does `index * 2 + 1` on texture/normal indices without overflow
+//!   checks, which panics in debug builds — and reports it with its line number;
+//! - reports NaN/infinite `v` coordinates with their line number;
+//! - counts triangles against [`ImportLimits::max_triangles`] before `tobj` allocates;
+//! - collects `usemtl` names in order of first use, which become the material indices;
+//! - blanks (turns into ignored lines) `l` polylines, which `tobj` would otherwise turn into
+//!   triangles, and `mtllib` lines, so that `tobj` never parses a `.mtl` file (its MTL parser
+//!   unwraps on malformed colour lines, and we only need material names).
+//!
+//! `tobj` then parses with `single_index` (positions, normals and UVs share one index, so a
+//! vertex is split wherever its UV or normal differs: seams stay correct) and `triangulate`
+//! (polygons become fans around their first vertex; points and lines are ignored).
+
+use std::io::{BufRead, Cursor, Read};
+use std::path::{Path, PathBuf};
+
+use super::{
+    asset_dir, check_triangle_count, check_vertex_count, resolve_inside, ImportErrorKind, ImportLimits, KindResult,
+    MeshBuilder,
+};
+use super::obj_syntax::{out_of_range, record_material};
+use crate::SourceMesh;
+
+/// What the scan learned about an OBJ file.
+#[derive(Debug, Default)]
+struct Scan {
+    /// `usemtl` names in order of first use; a name's position is its material index.
+    material_names: Vec<String>,
+    /// Triangles after fan triangulation of every face with three or more vertices.
+    triangles: u64,
+    /// Byte offsets of keywords to overwrite with `#` (`l`, `mtllib`): tobj ignores them then.
+    blank: Vec<usize>,
+}
+
+
+/// The UTF-8 byte order mark some editors put at the start of a text file.
+const BOM: &str = "\u{feff}";
+
+/// Imports OBJ text; `bytes` is the whole file (not empty, already size-checked).
+pub(super) fn import(mut bytes: Vec<u8>, limits: &ImportLimits) -> KindResult<SourceMesh> {
+    // A UTF-8 byte order mark would make tobj ignore the first line; blank it.
+    if bytes.starts_with(BOM.as_bytes()) {
+        bytes[..BOM.len()].fill(b' ');
+    }
+    let scan = scan(text(&bytes)?)?;
+    check_triangle_count(scan.triangles, limits)?;
+    for &offset in &scan.blank {
+        bytes[offset] = b'#';
+    }
+
+    // Every usemtl name resolves to its first-use index through one synthetic material
+    // library, announced by a synthetic first line (the real `mtllib` lines are blanked).
+    let materials: Vec<tobj::Material> =
+        scan.material_names.iter().map(|name| tobj::Material { name: name.clone(), ..Default::default() }).collect();
+    let load_materials = |_: &Path| -> tobj::MTLLoadResult {
+        let by_name = materials.iter().enumerate();
+        Ok((materials.clone(), by_name.map(|(i, m)| (m.name.clone(), i)).collect()))
+    };
+    let options = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
+    let mut reader = Cursor::new(&b"mtllib mres-usemtl-names\n"[..]).chain(Cursor::new(&bytes));
+    let (models, _) =
+        tobj::load_obj_buf(&mut reader, &options, load_materials).map_err(|e| ImportErrorKind::Parse(e.to_string()))?;
+
+    convert(&models, scan.material_names.len(), scan.triangles, limits)
+}
+
+/// Merges the `tobj` models (one per object/group and material) into one mesh.
+fn convert(
+    models: &[tobj::Model],
+    unnamed_material: usize,
+    triangles: u64,
+    limits: &ImportLimits,
+) -> KindResult<SourceMesh> {
+    let vertices: usize = models.iter().map(|m| m.mesh.positions.len() / 3).sum();
+    check_vertex_count(vertices as u64, limits)?;
+    // A model with vertices but without one normal (UV) per vertex means some face vertex
+    // had no `vn` (`vt`): drop that attribute for the whole mesh.
+    let with_vertices = || models.iter().map(|m| &m.mesh).filter(|m| !m.positions.is_empty());
+    let has_normals = with_vertices().all(|m| m.normals.len() == m.positions.len());
+    let has_uvs = with_vertices().all(|m| m.texcoords.len() / 2 == m.positions.len() / 3);
+
+    let mut builder = MeshBuilder::new(has_normals, has_uvs, vertices, triangles as usize);
+    for model in models {
+        let mesh = &model.mesh;
+        let count = mesh.positions.len() / 3;
+        let base = builder.vertex_count();
+        for v in 0..count {
+            let at = |data: &[f32], n: usize, k: usize| data.get(n * v + k).copied();
+            let position = [0, 1, 2].map(|k| at(&mesh.positions, 3, k).unwrap_or(f32::NAN));
+            if !position.iter().all(|c| c.is_finite()) {
+                return Err(ImportErrorKind::NonFinitePosition(format!(
+                    "{position:?} in object {:?} (after dividing by w)",
+                    model.name
+                )));
+            }
+            let normal = [0, 1, 2].map(|k| at(&mesh.normals, 3, k).unwrap_or(0.0));
+            let uv = [0, 1].map(|k| at(&mesh.texcoords, 2, k).unwrap_or(0.0));
+            builder.push_vertex(position, normal, uv);
+        }
+        let material = model.mesh.material_id.unwrap_or(unnamed_material) as u32;
+        for triangle in mesh.indices.chunks_exact(3) {
+            let mut corners = [0u32; 3];
+            for (corner, &index) in corners.iter_mut().zip(triangle) {
+                // tobj only emits indices of vertices it emitted; checked anyway.
+                if index as usize >= count {
+                    return Err(ImportErrorKind::IndexOutOfRange {
+                        what: format!("object {:?}: parsed vertex", model.name),
+                        index: i64::from(index),
+                        count: count as u64,
+                    });
+                }
+                *corner = (base + index as usize) as u32;
+            }
+            builder.push_triangle(corners, material);
+        }
+    }
+    builder.finish()
+}
+
+/// The file as text; OBJ files are ASCII in practice, and `tobj` needs UTF-8.
+fn text(bytes: &[u8]) -> KindResult<&str> {
+    std::str::from_utf8(bytes)
+        .map_err(|e| ImportErrorKind::Parse(format!("not UTF-8 text (at byte {})", e.valid_up_to())))
+}
+
+/// Lines of `text` as `tobj` sees them (split at `\n`), with their 1-based numbers and byte
+/// offsets.
+fn lines(text: &str) -> impl Iterator<Item = (usize, usize, &str)> {
+    text.split('\n')
+        .scan(0usize, |offset, line| {
+            let start = *offset;
+            *offset += line.len() + 1;
+            Some((start, line))
+        })
+        .enumerate()
+        .map(|(n, (start, line))| (n + 1, start, line))
+}
+
+/// Validates faces and vertices and collects what [`import`] needs; see the module docs.
+fn scan(text: &str) -> KindResult<Scan> {
+    let mut scan = Scan::default();
+    let mut counts = [0u64; 3];
+    // Largest positive index per slot and its line, checked against the final counts
+    // (tobj resolves positive indices against the whole file).
+    let mut max_positive: [(u64, usize); 3] = [(0, 0); 3];
+
+    for (line_no, start, line) in lines(text) {
+        let mut words = line.split_whitespace();
+        let Some(keyword) = words.next() else {
+            continue;
+        };
+        let keyword_offset = start + (line.len() - line.trim_start().len());
+        match keyword {
+            "v" => {
+                counts[0] += 1;
+                check_finite_vertex(words, line_no)?;
+            }
+            "vt" => counts[1] += 1,
+            "vn" => counts[2] += 1,
+            "l" | "mtllib" => scan.blank.push(keyword_offset),
+            "usemtl" => record_material(&mut scan.material_names, line, line_no)?,
+            "f" => {
+                let mut corners = 0u64;
+                for vertex in words {
+                    // Resolved as tobj will: relative indices against the counts so far.
+                    super::obj_syntax::corner(vertex, line_no, &counts, Some(&mut max_positive))?;
+                    corners += 1;
+                }
+                scan.triangles += corners.saturating_sub(2);
+            }
+            _ => {}
+        }
+    }
+    for (slot, &(index, line_no)) in max_positive.iter().enumerate() {
+        if index > counts[slot] {
+            return Err(out_of_range(line_no, slot, index as i64, counts[slot]));
+        }
+    }
+    Ok(scan)
+}
+
+/// Reports a `v` line whose coordinates parse but are NaN or infinite.
+fn check_finite_vertex(words: std::str::SplitWhitespace<'_>, line_no: usize) -> KindResult<()> {
+    let coordinates: Vec<f32> = words.take(3).filter_map(|w| w.parse().ok()).collect();
+    // Unparsable coordinates are left to tobj, which reports them.
+    if coordinates.iter().any(|c| !c.is_finite()) {
+        return Err(ImportErrorKind::NonFinitePosition(format!("line {line_no}: v {coordinates:?}")));
+    }
+    Ok(())
+}
+
+/// The `mtllib` files of an OBJ that exist inside its directory, in order of first mention.
+///
+/// `tobj` reads the rest of an `mtllib` line as one file name; the OBJ spec allows several
+/// names separated by spaces. Both readings are tried: the whole rest if it names a file,
+/// else each word.
+pub(super) fn referenced_files(path: &Path, bytes: &[u8]) -> KindResult<Vec<PathBuf>> {
+    let dir = asset_dir(path);
+    let mut files: Vec<PathBuf> = Vec::new();
+    let mut add = |file: PathBuf| {
+        if !files.contains(&file) {
+            files.push(file);
+        }
+    };
+    let text = text(bytes)?;
+    for line in Cursor::new(text.trim_start_matches(BOM)).lines() {
+        let line = line.map_err(ImportErrorKind::Io)?;
+        if line.split_whitespace().next() != Some("mtllib") {
+            continue;
+        }
+        let rest = line.trim_start()["mtllib".len()..].trim();
+        let existing = |name: &str| resolve_inside(&dir, name).filter(|p| p.is_file());
+        if let Some(file) = existing(rest) {
+            add(file);
+        } else {
+            rest.split_whitespace().filter_map(existing).for_each(&mut add);
+        }
+    }
+    Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn import_str(text: &str) -> KindResult<SourceMesh> {
+        import(text.as_bytes().to_vec(), &ImportLimits::default())
+    }
+
+    #[test]
+    fn usemtl_without_library_numbers_by_first_use() {
+        let mesh = import_str(
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n\
+             f 1 2 3\nusemtl b\nf 2 4 3\nusemtl a\nf 1 2 4\nusemtl b\nf 1 4 3\n",
+        )
+        .unwrap();
+        // Faces before any usemtl get one past the named materials (2).
+        assert_eq!(mesh.materials, vec![2, 0, 1, 0]);
+    }
+
+    #[test]
+    fn polylines_and_points_are_not_triangles() {
+        let err = import_str("v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2 3\nf 1\nf 1 2\n").unwrap_err();
+        assert!(matches!(err, ImportErrorKind::NoTriangles { .. }), "{err}");
+    }
+
+    #[test]
+    fn zero_and_overflowing_indices_are_errors_not_panics() {
+        for face in [
+            "f 1/0 2/1 3/1",
+            "f 1//0 2//1 3//1",
+            "f 1/-9223372036854775808 2/1 3/1",
+            "f 1/9223372036854775807 2/1 3/1",
+            "f -4 1 2",
+            "f 0 1 2",
+            "f 1 2 4",
+        ] {
+            let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n{face}\n");
+            let err = import_str(&text).unwrap_err();
+            assert!(matches!(err, ImportErrorKind::IndexOutOfRange { .. }), "{face}: {err}");
+        }
+    }
+
+    #[test]
+    fn bom_is_ignored() {
+        let mesh = import_str("\u{feff}v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+        assert_eq!(mesh.triangle_count(), 1);
+    }
+}
