@@ -11,8 +11,8 @@ mod tempfile;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-use mres_import::{import_file, referenced_files, ImportLimits};
 use libfuzzer_sys::fuzz_target;
+use mres_import::{import_file, referenced_files, ImportLimits};
 
 const LIMITS: ImportLimits = ImportLimits { max_file_bytes: 1 << 20, max_triangles: 1 << 20 };
 

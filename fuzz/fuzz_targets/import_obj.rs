@@ -11,9 +11,9 @@ mod tempfile;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+use libfuzzer_sys::fuzz_target;
 use mres_import::obj_stream::ObjVertices;
 use mres_import::{import_file, referenced_files, ImportLimits};
-use libfuzzer_sys::fuzz_target;
 
 const LIMITS: ImportLimits = ImportLimits { max_file_bytes: 1 << 20, max_triangles: 1 << 20 };
 
@@ -22,7 +22,11 @@ static PATH: OnceLock<PathBuf> = OnceLock::new();
 fuzz_target!(|data: &[u8]| {
     // A material library next to the input, so `mtllib x.mtl` lines can resolve.
     let path = PATH.get_or_init(|| {
-        tempfile::input_path("obj", "obj", &[("x.mtl", include_bytes!("../../formats/import/tests/data/two_objects.mtl"))])
+        tempfile::input_path(
+            "obj",
+            "obj",
+            &[("x.mtl", include_bytes!("../../formats/import/tests/data/two_objects.mtl"))],
+        )
     });
     tempfile::write(path, data);
     let whole = import_file(path, &LIMITS);
@@ -38,11 +42,8 @@ fuzz_target!(|data: &[u8]| {
             }
         })
         .expect("pass 2 succeeds after pass 1");
-        let expected: Vec<[[f32; 3]; 3]> = mesh
-            .indices
-            .chunks_exact(3)
-            .map(|t| [0, 1, 2].map(|k| mesh.positions[t[k] as usize]))
-            .collect();
+        let expected: Vec<[[f32; 3]; 3]> =
+            mesh.indices.chunks_exact(3).map(|t| [0, 1, 2].map(|k| mesh.positions[t[k] as usize])).collect();
         assert_eq!(triangles, expected, "streamed and whole imports differ");
     }
 });

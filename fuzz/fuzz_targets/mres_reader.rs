@@ -6,8 +6,8 @@
 //! past the checksums see `mres_reader_resealed`.
 #![no_main]
 
-use mres_format::MresFile;
 use libfuzzer_sys::fuzz_target;
+use mres_format::MresFile;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(file) = MresFile::parse(data.to_vec()) {

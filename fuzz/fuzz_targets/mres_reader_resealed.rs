@@ -8,8 +8,8 @@
 #[path = "reseal.rs"]
 mod reseal;
 
-use mres_format::{uniform_cut, view_cut, MresFile, ViewParams};
 use libfuzzer_sys::fuzz_target;
+use mres_format::{uniform_cut, view_cut, MresFile, ViewParams};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(file) = MresFile::parse(reseal::seal(data)) else { return };

@@ -1,6 +1,6 @@
 //! Benchmark mode: an N×N grid of instances of the file's mesh seen along a fixed camera path,
-//! drawn three ways in the same run: the DAG (GPU instance culling + per-cluster LOD selection
-//! + mesh shaders or the fallback), every instance at full resolution, and a discrete LOD chain
+//! drawn three ways in the same run: the DAG (GPU instance culling, per-cluster LOD selection,
+//! mesh shaders or the fallback), every instance at full resolution, and a discrete LOD chain
 //! (meshopt levels, one per instance by the same screen-space error rule). GPU timestamps per
 //! pass, clusters and triangles drawn, and wall-clock frame times.
 
@@ -96,8 +96,16 @@ pub fn run_bench(
     let clusters = scene.clusters.len() as u32;
 
     // DAG.
-    let (mut select, mut expand, mut raster, mut total, mut wall, mut drawn_clusters, mut tris, mut dropped) =
-        (Stats::default(), Stats::default(), Stats::default(), Stats::default(), Stats::default(), Stats::default(), Stats::default(), 0u64);
+    let (mut select, mut expand, mut raster, mut total, mut wall, mut drawn_clusters, mut tris, mut dropped) = (
+        Stats::default(),
+        Stats::default(),
+        Stats::default(),
+        Stats::default(),
+        Stats::default(),
+        Stats::default(),
+        Stats::default(),
+        0u64,
+    );
     for i in 0..options.frames + 3 {
         let view = camera(i.saturating_sub(3)).gpu_view(options.tau, &scene.grid, clusters, FLAG_FRUSTUM_CULL);
         let started = Instant::now();
@@ -137,7 +145,12 @@ pub fn run_bench(
             (Stats::default(), Stats::default(), Stats::default(), Stats::default(), Stats::default());
         let mut per_level = vec![0u64; chain.levels.len()];
         for i in 0..frames + 1 {
-            let view = camera(i.saturating_sub(1) * options.frames / frames.max(1)).gpu_view(options.tau, &scene.grid, clusters, FLAG_FRUSTUM_CULL | flags);
+            let view = camera(i.saturating_sub(1) * options.frames / frames.max(1)).gpu_view(
+                options.tau,
+                &scene.grid,
+                clusters,
+                FLAG_FRUSTUM_CULL | flags,
+            );
             let started = Instant::now();
             let frame = chain_renderer.render(&view, w, h)?;
             let elapsed = started.elapsed().as_secs_f64() * 1e3;

@@ -65,7 +65,14 @@ pub fn mul(a: &[[f32; 4]; 4], b: &[[f32; 4]; 4]) -> [[f32; 4]; 4] {
 impl Camera {
     /// A camera at `eye` looking at the centre of `bounds`, with the near plane scaled to it.
     pub fn looking_at(eye: [f32; 3], bounds: &Sphere, width: u32, height: u32) -> Camera {
-        Camera { eye, target: bounds.center, proj_y: proj_y(DEFAULT_FOV_Y), z_near: bounds.radius * 1e-3, width, height }
+        Camera {
+            eye,
+            target: bounds.center,
+            proj_y: proj_y(DEFAULT_FOV_Y),
+            z_near: bounds.radius * 1e-3,
+            width,
+            height,
+        }
     }
 
     /// A camera that frames `bounds` from a fixed three-quarter direction.
@@ -82,7 +89,8 @@ impl Camera {
     /// The world-to-view matrix (right-handed, looking down −z, y up).
     pub fn view_matrix(&self) -> [[f32; 4]; 4] {
         let f = normalize(sub(self.target, self.eye));
-        let up = if cross(f, [0.0, 1.0, 0.0]).iter().all(|v| v.abs() < 1e-4) { [0.0, 0.0, 1.0] } else { [0.0, 1.0, 0.0] };
+        let up =
+            if cross(f, [0.0, 1.0, 0.0]).iter().all(|v| v.abs() < 1e-4) { [0.0, 0.0, 1.0] } else { [0.0, 1.0, 0.0] };
         let s = normalize(cross(f, up));
         let u = cross(s, f);
         let e = self.eye;
@@ -112,7 +120,8 @@ impl Camera {
         let vp = mul(&self.projection(), &self.view_matrix());
         let row = |r: usize| [vp[0][r], vp[1][r], vp[2][r], vp[3][r]];
         let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
-        let add = |a: [f32; 4], b: [f32; 4], s: f32| [a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2], a[3] + s * b[3]];
+        let add =
+            |a: [f32; 4], b: [f32; 4], s: f32| [a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2], a[3] + s * b[3]];
         // Vulkan clip space: −w ≤ x, y ≤ w and 0 ≤ z ≤ w; with reverse-Z, z ≤ w is the near
         // plane and z ≥ 0 holds everywhere (no far plane).
         let planes = [add(r3, r0, 1.0), add(r3, r0, -1.0), add(r3, r1, 1.0), add(r3, r1, -1.0), add(r3, r2, -1.0), r2];
@@ -242,7 +251,9 @@ mod tests {
         assert!((n[2] / n[3] - 1.0).abs() < 1e-3);
         // The framed sphere is inside the frustum, a point behind the eye is not.
         let view = cam.gpu_view(1.0, &Grid { origin: [0.0; 3], step: 1.0 }, 0, 0);
-        let inside = |p: [f32; 3], r: f32| view.frustum.iter().all(|pl| pl[0] * p[0] + pl[1] * p[1] + pl[2] * p[2] + pl[3] >= -r);
+        let inside = |p: [f32; 3], r: f32| {
+            view.frustum.iter().all(|pl| pl[0] * p[0] + pl[1] * p[1] + pl[2] * p[2] + pl[3] >= -r)
+        };
         assert!(inside(bounds.center, bounds.radius));
         let behind = [cam.eye[0] - f[0] * 10.0, cam.eye[1] - f[1] * 10.0, cam.eye[2] - f[2] * 10.0];
         assert!(!inside(behind, 1.0));

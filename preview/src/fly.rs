@@ -53,7 +53,8 @@ impl FlyCamera {
         let c = bounds.center;
         let d = [c[0] - eye[0], c[1] - eye[1], c[2] - eye[2]];
         let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        let (yaw, pitch) = if len > 0.0 { (d[0].atan2(-d[2]), (d[1] / len).clamp(-1.0, 1.0).asin()) } else { (0.0, 0.0) };
+        let (yaw, pitch) =
+            if len > 0.0 { (d[0].atan2(-d[2]), (d[1] / len).clamp(-1.0, 1.0).asin()) } else { (0.0, 0.0) };
         let pitch_clamped = pitch.clamp(-MAX_PITCH, MAX_PITCH);
         let target = (len > 0.0 && pitch == pitch_clamped).then_some(c);
         FlyCamera { position: eye, yaw, pitch: pitch_clamped, bounds: *bounds, target }

@@ -286,11 +286,21 @@ mod tests {
 
     #[test]
     fn mode_and_flag_constants_match_glsl() {
-        for (name, value) in [("MODE_SHADED", MODE_SHADED), ("MODE_CLUSTER", MODE_CLUSTER), ("MODE_GROUP", MODE_GROUP),
-            ("MODE_LEVEL", MODE_LEVEL), ("MODE_ERROR", MODE_ERROR), ("FLAG_FRUSTUM_CULL", FLAG_FRUSTUM_CULL),
-            ("FLAG_WRITE_PROJECTED", FLAG_WRITE_PROJECTED), ("FLAG_DROP_SOME", FLAG_DROP_SOME),
-            ("FLAG_FULL_DETAIL", FLAG_FULL_DETAIL)] {
-            assert!(COMMON_GLSL.contains(&format!("const uint {name} = {value}u;")), "{name} = {value} not in common.glsl");
+        for (name, value) in [
+            ("MODE_SHADED", MODE_SHADED),
+            ("MODE_CLUSTER", MODE_CLUSTER),
+            ("MODE_GROUP", MODE_GROUP),
+            ("MODE_LEVEL", MODE_LEVEL),
+            ("MODE_ERROR", MODE_ERROR),
+            ("FLAG_FRUSTUM_CULL", FLAG_FRUSTUM_CULL),
+            ("FLAG_WRITE_PROJECTED", FLAG_WRITE_PROJECTED),
+            ("FLAG_DROP_SOME", FLAG_DROP_SOME),
+            ("FLAG_FULL_DETAIL", FLAG_FULL_DETAIL),
+        ] {
+            assert!(
+                COMMON_GLSL.contains(&format!("const uint {name} = {value}u;")),
+                "{name} = {value} not in common.glsl"
+            );
         }
     }
 

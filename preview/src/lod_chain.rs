@@ -68,7 +68,8 @@ impl LodChain {
         while current.len() / 3 >= min_triangles.max(2) && levels.len() < 20 {
             let target = (current.len() / 2 / 3 * 3).max(3);
             let mut relative = 0.0f32;
-            let next = meshopt::simplify(&current, &adapter, target, 1.0, meshopt::SimplifyOptions::None, Some(&mut relative));
+            let next =
+                meshopt::simplify(&current, &adapter, target, 1.0, meshopt::SimplifyOptions::None, Some(&mut relative));
             if next.is_empty() || next.len() * 10 > current.len() * 9 {
                 break;
             }

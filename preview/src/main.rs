@@ -141,7 +141,8 @@ fn parse_size(s: &str) -> Result<(u32, u32)> {
 }
 
 fn parse_vec3(s: &str) -> Result<[f32; 3]> {
-    let v: Vec<f32> = s.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().context("--camera wants x,y,z")?;
+    let v: Vec<f32> =
+        s.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().context("--camera wants x,y,z")?;
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
         _ => bail!("--camera wants three finite numbers x,y,z"),
@@ -174,14 +175,21 @@ fn run_window(args: &Args) -> Result<ExitCode> {
     let file = MresFile::open(&args.file).with_context(|| format!("cannot read {}", args.file.display()))?;
     let scene = SceneData::from_file(&file).with_context(|| format!("{}", args.file.display()))?;
     let options = preview::viewer::ViewerOptions {
-        label: args.file.file_name().map_or_else(|| args.file.display().to_string(), |n| n.to_string_lossy().into_owned()),
+        label: args
+            .file
+            .file_name()
+            .map_or_else(|| args.file.display().to_string(), |n| n.to_string_lossy().into_owned()),
         size,
         tau: args.tau,
         mode: args.mode.gpu(),
         eye: args.camera.as_deref().map(parse_vec3).transpose()?,
         frames: args.frames.map(|n| n.max(1)),
         screenshot: args.out.clone(),
-        renderer: RendererOptions { naive_arithmetic: args.naive_arithmetic, path: path_choice(args.path), ..Default::default() },
+        renderer: RendererOptions {
+            naive_arithmetic: args.naive_arithmetic,
+            path: path_choice(args.path),
+            ..Default::default()
+        },
         context: ContextOptions {
             validation: args.validate,
             device_name: args.device.clone(),
@@ -236,7 +244,8 @@ fn run(args: Args) -> Result<ExitCode> {
     if args.bench {
         let instances = preview::bench::grid_instances(&scene, args.grid);
         let started = std::time::Instant::now();
-        let chain = preview::lod_chain::LodChain::build(&file, 128).with_context(|| format!("{}", args.file.display()))?;
+        let chain =
+            preview::lod_chain::LodChain::build(&file, 128).with_context(|| format!("{}", args.file.display()))?;
         println!(
             "LOD chain: {} levels ({} .. {} triangles) in {:.1} s",
             chain.levels.len(),
@@ -244,7 +253,11 @@ fn run(args: Args) -> Result<ExitCode> {
             chain.levels.last().map_or(0, |l| l.index_count / 3),
             started.elapsed().as_secs_f64()
         );
-        let mut dag = Renderer::new(&device, &scene, RendererOptions { path, instances: instances.clone(), ..Default::default() })?;
+        let mut dag = Renderer::new(
+            &device,
+            &scene,
+            RendererOptions { path, instances: instances.clone(), ..Default::default() },
+        )?;
         println!("draw path: {}", dag.path_name());
         let mut chain_renderer = preview::vk::ChainRenderer::new(&device, &chain, &instances)?;
         let options = preview::bench::BenchOptions {
@@ -257,7 +270,14 @@ fn run(args: Args) -> Result<ExitCode> {
         };
         println!(
             "bench: {}x{} instances of {} triangles ({} source triangles), {}x{}, tau {} px, {} frames",
-            args.grid, args.grid, scene.level0_triangles, scene.level0_triangles * (args.grid as u64).pow(2), width, height, args.tau, options.frames
+            args.grid,
+            args.grid,
+            scene.level0_triangles,
+            scene.level0_triangles * (args.grid as u64).pow(2),
+            width,
+            height,
+            args.tau,
+            options.frames
         );
         let mut report = preview::bench::run_bench(&mut dag, &mut chain_renderer, &chain, &scene, &options)?;
         report["device"] = json!({ "name": info.name, "driver": info.driver, "api_version": info.api_version });
@@ -265,18 +285,27 @@ fn run(args: Args) -> Result<ExitCode> {
         drop(dag);
         drop(chain_renderer);
         if let Some(path) = &args.json {
-            std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n").with_context(|| format!("cannot write {}", path.display()))?;
+            std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n")
+                .with_context(|| format!("cannot write {}", path.display()))?;
         }
         if !args.verify && args.out.is_none() {
             drop(device);
             if args.validate {
                 println!("validation messages: {} errors, {} warnings", counts.errors(), counts.warnings());
-                return Ok(if counts.errors() + counts.warnings() == 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE });
+                return Ok(if counts.errors() + counts.warnings() == 0 {
+                    ExitCode::SUCCESS
+                } else {
+                    ExitCode::FAILURE
+                });
             }
             return Ok(ExitCode::SUCCESS);
         }
     }
-    let mut renderer = Renderer::new(&device, &scene, RendererOptions { naive_arithmetic: args.naive_arithmetic, path, ..Default::default() })?;
+    let mut renderer = Renderer::new(
+        &device,
+        &scene,
+        RendererOptions { naive_arithmetic: args.naive_arithmetic, path, ..Default::default() },
+    )?;
     println!("draw path: {}", renderer.path_name());
     let mut ok = true;
     let mut report_json = json!({
@@ -299,7 +328,9 @@ fn run(args: Args) -> Result<ExitCode> {
         write_png(out, frame.width, frame.height, &frame.rgba)?;
         let times = frame
             .times
-            .map(|t| format!("; GPU select {:.3} ms, expand {:.3} ms, draw {:.3} ms", t.select_ms, t.expand_ms, t.draw_ms))
+            .map(|t| {
+                format!("; GPU select {:.3} ms, expand {:.3} ms, draw {:.3} ms", t.select_ms, t.expand_ms, t.draw_ms)
+            })
             .unwrap_or_default();
         println!(
             "screenshot: {} ({}x{}, eye {:?}, tau {} px): {} clusters, {} triangles{times}",

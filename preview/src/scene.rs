@@ -48,7 +48,8 @@ pub fn level_bins(clusters: &[GpuCluster]) -> (Vec<u32>, Vec<GpuLevelBin>) {
     let mut order: Vec<u32> = (0..clusters.len() as u32).collect();
     order.sort_by_key(|&i| clusters[i as usize].level);
     let levels = clusters.iter().map(|c| c.level as usize + 1).max().unwrap_or(0);
-    let mut bins = vec![GpuLevelBin { first: 0, count: 0, min_own_error: f32::INFINITY, max_parent_error: 0.0 }; levels];
+    let mut bins =
+        vec![GpuLevelBin { first: 0, count: 0, min_own_error: f32::INFINITY, max_parent_error: 0.0 }; levels];
     for (k, &i) in order.iter().enumerate() {
         let c = &clusters[i as usize];
         let bin = &mut bins[c.level as usize];
@@ -171,10 +172,8 @@ pub fn points_bounds(points: &[[f32; 3]]) -> Option<Sphere> {
         }
     }
     let c: [f64; 3] = std::array::from_fn(|k| (lo[k] as f64 + hi[k] as f64) * 0.5);
-    let r = points
-        .iter()
-        .map(|p| (0..3).map(|k| (p[k] as f64 - c[k]).powi(2)).sum::<f64>().sqrt())
-        .fold(0.0f64, f64::max);
+    let r =
+        points.iter().map(|p| (0..3).map(|k| (p[k] as f64 - c[k]).powi(2)).sum::<f64>().sqrt()).fold(0.0f64, f64::max);
     Some(Sphere { center: c.map(|v| v as f32), radius: (r * 1.0001 + 1e-6) as f32 })
 }
 
@@ -186,8 +185,8 @@ pub fn enclosing_sphere(spheres: &[Sphere]) -> Sphere {
     let n = spheres.len() as f64;
     let mut c = [0.0f64; 3];
     for s in spheres {
-        for k in 0..3 {
-            c[k] += s.center[k] as f64 / n;
+        for (ck, &sk) in c.iter_mut().zip(&s.center) {
+            *ck += sk as f64 / n;
         }
     }
     let radius = spheres

@@ -105,7 +105,9 @@ pub struct Disagreement {
 impl Disagreement {
     /// The disagreement as JSON, with each f32 also as its bits.
     pub fn to_json(&self) -> Value {
-        let bits = |v: [f32; 2]| json!([format!("{:e} ({:#010x})", v[0], v[0].to_bits()), format!("{:e} ({:#010x})", v[1], v[1].to_bits())]);
+        let bits = |v: [f32; 2]| {
+            json!([format!("{:e} ({:#010x})", v[0], v[0].to_bits()), format!("{:e} ({:#010x})", v[1], v[1].to_bits())])
+        };
         json!({
             "camera": self.camera, "eye": self.eye, "tau": if self.tau.is_nan() { Value::Null } else { json!(self.tau) },
             "cluster": self.cluster, "gpu_selected": self.gpu_selected, "cpu_selected": self.cpu_selected,
@@ -236,7 +238,12 @@ fn cpu_projected(file: &MresFile, view: &mres_format::ViewParams) -> Vec<[f32; 2
 }
 
 /// Runs the selection check and the crack test.
-pub fn verify(renderer: &mut Renderer, file: &MresFile, scene: &SceneData, options: &VerifyOptions) -> Result<VerifyReport> {
+pub fn verify(
+    renderer: &mut Renderer,
+    file: &MresFile,
+    scene: &SceneData,
+    options: &VerifyOptions,
+) -> Result<VerifyReport> {
     let mut report = VerifyReport { min_selected: usize::MAX, min_model_pixels: u64::MAX, ..Default::default() };
     let bounds = scene.bounds;
     let n = file.clusters.len() as u32;
@@ -333,11 +340,19 @@ pub fn verify(renderer: &mut Renderer, file: &MresFile, scene: &SceneData, optio
     report.depth_max_fraction = options.depth_max_fraction;
     for (ci, eye) in crack_eyes(&bounds, options.crack_cameras, options.seed ^ 0xc4ac).into_iter().enumerate() {
         let camera = Camera::looking_at(eye, &bounds, options.width, options.height);
-        let full = renderer.render_with_depth(&camera.gpu_view(0.0, &scene.grid, n, FLAG_FRUSTUM_CULL), options.width, options.height)?;
+        let full = renderer.render_with_depth(
+            &camera.gpu_view(0.0, &scene.grid, n, FLAG_FRUSTUM_CULL),
+            options.width,
+            options.height,
+        )?;
         let full_depth = full.depth.unwrap_or_default();
         for &tau in &options.crack_taus {
             let flags = FLAG_FRUSTUM_CULL | options.crack_flags;
-            let frame = renderer.render_with_depth(&camera.gpu_view(tau, &scene.grid, n, flags), options.width, options.height)?;
+            let frame = renderer.render_with_depth(
+                &camera.gpu_view(tau, &scene.grid, n, flags),
+                options.width,
+                options.height,
+            )?;
             let depth = compare_depth(
                 &camera,
                 tau,
@@ -353,12 +368,9 @@ pub fn verify(renderer: &mut Renderer, file: &MresFile, scene: &SceneData, optio
             // A back face within the depth tolerance of the full-detail surface is the cut
             // folding within its error (a tiny part flattened or turned over); one beyond it
             // shows the far inside: a hole.
-            let holes = frame
-                .rgba
-                .chunks_exact(4)
-                .zip(&depth.beyond)
-                .filter(|(p, &beyond)| *p == FLAG_RGBA && beyond)
-                .count() as u64;
+            let holes =
+                frame.rgba.chunks_exact(4).zip(&depth.beyond).filter(|(p, &beyond)| *p == FLAG_RGBA && beyond).count()
+                    as u64;
             report.max_hole_pixels = report.max_hole_pixels.max(holes);
             let model = count_model(&frame.rgba);
             report.crack_renders += 1;
@@ -367,7 +379,12 @@ pub fn verify(renderer: &mut Renderer, file: &MresFile, scene: &SceneData, optio
                 report.flagged_renders += 1;
                 if let Some(dir) = &options.failure_dir {
                     std::fs::create_dir_all(dir)?;
-                    write_png(&dir.join(format!("crack_cam{ci}_tau{tau}.png")), frame.width, frame.height, &frame.rgba)?;
+                    write_png(
+                        &dir.join(format!("crack_cam{ci}_tau{tau}.png")),
+                        frame.width,
+                        frame.height,
+                        &frame.rgba,
+                    )?;
                 }
             }
             if flagged > report.max_flagged_pixels || report.worst_crack.is_none() {

@@ -27,7 +27,9 @@ use crate::fly::{FlyCamera, Movement};
 use crate::gpu_types::{FLAG_FRUSTUM_CULL, MODE_CLUSTER, MODE_ERROR, MODE_GROUP, MODE_LEVEL, MODE_SHADED};
 use crate::image::write_png;
 use crate::scene::SceneData;
-use crate::vk::{ContextOptions, Device, DeviceInfo, Frame, MessageCounts, Renderer, RendererOptions, Surface, Swapchain};
+use crate::vk::{
+    ContextOptions, Device, DeviceInfo, Frame, MessageCounts, Renderer, RendererOptions, Surface, Swapchain,
+};
 
 /// τ range the keys and the wheel keep to, pixels.
 const TAU_RANGE: (f32, f32) = (1.0 / 64.0, 1024.0);
@@ -86,7 +88,9 @@ pub fn display_available() -> bool {
 /// Opens a window and runs the viewer until Esc, the window is closed, or `options.frames`.
 pub fn run(scene: &SceneData, cluster_count: u32, options: ViewerOptions) -> Result<ViewerReport> {
     if !display_available() {
-        bail!("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): use --headless with --out, --verify or --bench");
+        bail!(
+            "no display (neither DISPLAY nor WAYLAND_DISPLAY is set): use --headless with --out, --verify or --bench"
+        );
     }
     let event_loop = EventLoop::new().context("cannot open the display (use --headless to render without one)")?;
     event_loop.set_control_flow(ControlFlow::Poll);
@@ -131,7 +135,8 @@ pub fn run(scene: &SceneData, cluster_count: u32, options: ViewerOptions) -> Res
         options,
     };
     event_loop.run_app(&mut app).context("window event loop")?;
-    let (error, frames, last, screenshots) = (app.error.take(), app.frames, app.last.take(), std::mem::take(&mut app.screenshots));
+    let (error, frames, last, screenshots) =
+        (app.error.take(), app.frames, app.last.take(), std::mem::take(&mut app.screenshots));
     // The swapchain, surface, window, renderer and device go here, so that the caller's
     // `counts` holds every message of the session.
     drop(app);
@@ -207,7 +212,9 @@ impl Viewer {
         if on {
             // Locked where the platform has it (Wayland, macOS), else confined (X11, Windows);
             // look uses raw device motion either way.
-            let grabbed = window.set_cursor_grab(CursorGrabMode::Locked).or_else(|_| window.set_cursor_grab(CursorGrabMode::Confined));
+            let grabbed = window
+                .set_cursor_grab(CursorGrabMode::Locked)
+                .or_else(|_| window.set_cursor_grab(CursorGrabMode::Confined));
             if grabbed.is_ok() {
                 window.set_cursor_visible(false);
             }
@@ -285,7 +292,12 @@ impl Viewer {
         };
         let last_frame = self.options.frames.is_some_and(|n| self.frames + 1 >= n);
         let screenshot_path = if self.screenshot_now {
-            Some(self.options.screenshot.clone().unwrap_or_else(|| PathBuf::from(format!("preview-{:05}.png", self.frames))))
+            Some(
+                self.options
+                    .screenshot
+                    .clone()
+                    .unwrap_or_else(|| PathBuf::from(format!("preview-{:05}.png", self.frames))),
+            )
         } else if last_frame {
             self.options.screenshot.clone()
         } else {
@@ -302,7 +314,15 @@ impl Viewer {
         }
         if let Some(path) = screenshot_path {
             write_png(&path, frame.width, frame.height, &frame.rgba)?;
-            println!("screenshot: {} ({}x{}, eye {:?}, tau {} px, mode {})", path.display(), frame.width, frame.height, camera.eye, self.tau, mode_name(self.mode));
+            println!(
+                "screenshot: {} ({}x{}, eye {:?}, tau {} px, mode {})",
+                path.display(),
+                frame.width,
+                frame.height,
+                camera.eye,
+                self.tau,
+                mode_name(self.mode)
+            );
             self.screenshots.push(path);
             self.screenshot_now = false;
         }
@@ -314,11 +334,23 @@ impl Viewer {
             let fps = self.title_frames as f64 / since.as_secs_f64().max(1e-9);
             let gpu = frame
                 .times
-                .map(|t| format!("GPU {:.2} ms (select {:.2}, expand {:.2}, draw {:.2})", t.select_ms + t.expand_ms + t.draw_ms, t.select_ms, t.expand_ms, t.draw_ms))
+                .map(|t| {
+                    format!(
+                        "GPU {:.2} ms (select {:.2}, expand {:.2}, draw {:.2})",
+                        t.select_ms + t.expand_ms + t.draw_ms,
+                        t.select_ms,
+                        t.expand_ms,
+                        t.draw_ms
+                    )
+                })
                 .unwrap_or_else(|| "no GPU timestamps".into());
             let title = format!(
                 "preview — {} — {} — τ {:.3} px — {} clusters, {} triangles — {gpu} — {fps:.0} fps",
-                self.options.label, mode_name(self.mode), self.tau, frame.clusters, frame.triangles
+                self.options.label,
+                mode_name(self.mode),
+                self.tau,
+                frame.clusters,
+                frame.triangles
             );
             if let Some(window) = &self.window {
                 window.set_title(&title);

@@ -41,14 +41,30 @@ fn cube_dag(n: i32) -> Dag {
                     }
                 }
             }
-            clusters.push(DagCluster { group: 0, own_group: NO_GROUP, positions, normals: vec![], uvs: vec![], indices, materials: vec![] });
+            clusters.push(DagCluster {
+                group: 0,
+                own_group: NO_GROUP,
+                positions,
+                normals: vec![],
+                uvs: vec![],
+                indices,
+                materials: vec![],
+            });
         }
     }
     let corners: Vec<[i32; 3]> = (0..8).map(|c| [(c & 1) * n, ((c >> 1) & 1) * n, ((c >> 2) & 1) * n]).collect();
     // The 12 triangles of the cube over `corners`, counter-clockwise from outside.
     let faces = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
     let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
-    clusters.push(DagCluster { group: 1, own_group: 0, positions: corners, normals: vec![], uvs: vec![], indices, materials: vec![] });
+    clusters.push(DagCluster {
+        group: 1,
+        own_group: 0,
+        positions: corners,
+        normals: vec![],
+        uvs: vec![],
+        indices,
+        materials: vec![],
+    });
     let step = 2.0 / n as f32;
     let sphere = |r: f32| Sphere { center: [0.0; 3], radius: r };
     Dag {
@@ -82,7 +98,10 @@ fn gpu_required() -> bool {
 /// A device with validation where the layer exists, or None (and a note) without Vulkan.
 fn device(test: &str) -> Option<(Arc<Device>, Arc<MessageCounts>)> {
     let validation = validation_available();
-    assert!(validation || !gpu_required(), "MRES_PREVIEW_REQUIRE_GPU=1 but VK_LAYER_KHRONOS_validation is not installed");
+    assert!(
+        validation || !gpu_required(),
+        "MRES_PREVIEW_REQUIRE_GPU=1 but VK_LAYER_KHRONOS_validation is not installed"
+    );
     match Device::new(&ContextOptions { validation, allow_mesh_shaders: true, ..Default::default() }) {
         Ok(d) => {
             assert!(
@@ -118,7 +137,8 @@ fn gpu_selection_equals_cpu_and_the_closed_cube_shows_no_back_face() {
     let file = cube_file();
     let scene = SceneData::from_file(&file).unwrap();
     let mut renderer = Renderer::new(&device, &scene, RendererOptions::default()).unwrap();
-    let options = VerifyOptions { selection_cameras: 60, crack_cameras: 6, width: 128, height: 128, ..Default::default() };
+    let options =
+        VerifyOptions { selection_cameras: 60, crack_cameras: 6, width: 128, height: 128, ..Default::default() };
     let report = verify(&mut renderer, &file, &scene, &options).unwrap();
     println!("{}", report.to_json());
     assert!(report.passed(), "{:#?}", report.to_json());
@@ -172,7 +192,9 @@ fn crack_test_sees_a_hole() {
             let frame = renderer.render(&camera.gpu_view(0.0, &scene.grid, 7, FLAG_FRUSTUM_CULL), 96, 96).unwrap();
             assert_eq!(frame.clusters, 6);
             whole += count_flagged(&frame.rgba);
-            let frame = renderer.render(&camera.gpu_view(0.0, &scene.grid, 7, FLAG_FRUSTUM_CULL | FLAG_DROP_SOME), 96, 96).unwrap();
+            let frame = renderer
+                .render(&camera.gpu_view(0.0, &scene.grid, 7, FLAG_FRUSTUM_CULL | FLAG_DROP_SOME), 96, 96)
+                .unwrap();
             assert_eq!(frame.clusters, 5);
             holed += count_flagged(&frame.rgba);
         }
@@ -244,6 +266,7 @@ fn reference_cube_image(camera: &Camera) -> Vec<[f32; 3]> {
             let d: [f32; 3] = std::array::from_fn(|k| s[k] * nx + u[k] * ny + f[k]);
             // Slab test against the unit cube; the entry face gives the normal.
             let (mut t0, mut t1, mut axis) = (f32::NEG_INFINITY, f32::INFINITY, 0);
+            #[allow(clippy::needless_range_loop)] // k is also the axis recorded
             for k in 0..3 {
                 let (a, b) = ((-1.0 - camera.eye[k]) / d[k], (1.0 - camera.eye[k]) / d[k]);
                 let (near, far) = (a.min(b), a.max(b));
@@ -304,8 +327,16 @@ fn screenshot_matches_a_cpu_reference_image() {
             assert!(mean < 0.004, "eye {eye:?} tau {tau}: mean difference {mean}");
             frames.push(frame.rgba);
         }
-        let same = frames[0].chunks_exact(4).zip(frames[1].chunks_exact(4)).filter(|(a, b)| (0..3).all(|k| a[k].abs_diff(b[k]) <= 3)).count();
-        assert!(same >= (w * h) as usize * 99 / 100, "eye {eye:?}: the two cuts differ in {} pixels", (w * h) as usize - same);
+        let same = frames[0]
+            .chunks_exact(4)
+            .zip(frames[1].chunks_exact(4))
+            .filter(|(a, b)| (0..3).all(|k| a[k].abs_diff(b[k]) <= 3))
+            .count();
+        assert!(
+            same >= (w * h) as usize * 99 / 100,
+            "eye {eye:?}: the two cuts differ in {} pixels",
+            (w * h) as usize - same
+        );
     }
     drop(renderer);
     drop(device);
@@ -323,8 +354,10 @@ fn mesh_and_fallback_paths_agree() {
     }
     let file = cube_file();
     let scene = SceneData::from_file(&file).unwrap();
-    let mut mesh = Renderer::new(&device, &scene, RendererOptions { path: DrawPath::Mesh, ..Default::default() }).unwrap();
-    let mut fallback = Renderer::new(&device, &scene, RendererOptions { path: DrawPath::Fallback, ..Default::default() }).unwrap();
+    let mut mesh =
+        Renderer::new(&device, &scene, RendererOptions { path: DrawPath::Mesh, ..Default::default() }).unwrap();
+    let mut fallback =
+        Renderer::new(&device, &scene, RendererOptions { path: DrawPath::Fallback, ..Default::default() }).unwrap();
     assert!(mesh.mesh_path() && !fallback.mesh_path());
     let (w, h) = (128, 96);
     for eye in [[2.6, 1.7, 3.1], [-3.0, -2.2, 1.2]] {
@@ -336,8 +369,17 @@ fn mesh_and_fallback_paths_agree() {
                 let a = mesh.render(&view, w, h).unwrap();
                 let b = fallback.render(&view, w, h).unwrap();
                 assert_eq!((a.clusters, a.triangles), (b.clusters, b.triangles));
-                let same = a.rgba.chunks_exact(4).zip(b.rgba.chunks_exact(4)).filter(|(p, q)| (0..3).all(|k| p[k].abs_diff(q[k]) <= 3)).count();
-                assert!(same * 1000 >= (w * h) as usize * 995, "eye {eye:?} tau {tau} mode {mode}: {} pixels differ", (w * h) as usize - same);
+                let same = a
+                    .rgba
+                    .chunks_exact(4)
+                    .zip(b.rgba.chunks_exact(4))
+                    .filter(|(p, q)| (0..3).all(|k| p[k].abs_diff(q[k]) <= 3))
+                    .count();
+                assert!(
+                    same * 1000 >= (w * h) as usize * 995,
+                    "eye {eye:?} tau {tau} mode {mode}: {} pixels differ",
+                    (w * h) as usize - same
+                );
                 assert_eq!(count_flagged(&a.rgba), 0);
             }
         }
@@ -383,7 +425,10 @@ fn window_without_a_display_suggests_headless() {
 #[test]
 fn window_under_xvfb_shows_the_headless_image() {
     let window_required = std::env::var("MRES_PREVIEW_REQUIRE_WINDOW").is_ok_and(|v| v == "1");
-    let has_xvfb = std::process::Command::new("sh").args(["-c", "command -v xvfb-run && command -v xauth"]).output().is_ok_and(|o| o.status.success());
+    let has_xvfb = std::process::Command::new("sh")
+        .args(["-c", "command -v xvfb-run && command -v xauth"])
+        .output()
+        .is_ok_and(|o| o.status.success());
     if !has_xvfb {
         assert!(!window_required, "MRES_PREVIEW_REQUIRE_WINDOW=1 but xvfb-run or xauth is not installed");
         println!("window: SKIPPED, no xvfb-run");

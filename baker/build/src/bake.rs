@@ -1,15 +1,15 @@
 //! One bake: import → weld → DAG → `.mres` bytes.
 
+use crate::dag::{build_dag, BuildStats};
 pub use crate::error::BakeError;
 pub use crate::progress::Progress;
-use crate::dag::{build_dag, BuildStats};
 use crate::settings::BakeSettings;
 use crate::shard::{build_sharded, ShardSource};
 use crate::weld::weld;
 use mres_import::mesh::{Corner, NONE};
 use mres_import::obj_stream::ObjVertices;
-use mres_import::{import_file, ImportLimits, InputKind};
 use mres_import::SourceMesh;
+use mres_import::{import_file, ImportLimits, InputKind};
 use std::path::Path;
 use std::time::Instant;
 

@@ -8,8 +8,8 @@
 //! Higher levels keep the smaller minimum, which gives tighter clusters.
 
 use crate::settings::BakeSettings;
-use mres_format::Sphere;
 use meshopt::VertexDataAdapter;
+use mres_format::Sphere;
 
 /// Splits `indices` (a triangle list into `positions`) into clusters of `min_triangles` (a
 /// multiple of 4) to `settings.max_triangles` triangles, except the last; each returned

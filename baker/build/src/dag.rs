@@ -9,12 +9,12 @@
 
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::deviation::{part_sizes, simplify_measured};
-use mres_geom::edges::sorted_edge_keys;
 use crate::partition::{cluster_graph, partition};
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Method};
 use crate::weld::WeldedMesh;
 use mres_format::{Dag, DagCluster, Group, Header, Sphere, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS, NO_GROUP};
+use mres_geom::edges::sorted_edge_keys;
 use rayon::prelude::*;
 
 /// Most clusters the final root group may hold. A mesh whose coarsest clusters cannot be
@@ -37,6 +37,9 @@ pub(crate) struct Cluster {
     /// The group it belongs to (assigned when its group is simplified or made root).
     pub group: u32,
 }
+
+/// One simplified group: its triangles split into parent clusters, its error, the method used.
+type Simplified = (Vec<Vec<u32>>, f32, Method);
 
 /// Figures about one build, for reports.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -196,7 +199,7 @@ impl<'a> Builder<'a> {
         };
         let (special, part_size) = (&self.special, &self.part_size);
         let own_errors: Vec<f32> = self.pending.iter().map(|&c| clusters[c].own_error).collect();
-        let results: Vec<Option<(Vec<Vec<u32>>, f32, Method)>> = parts
+        let results: Vec<Option<Simplified>> = parts
             .par_iter()
             .map(|part| {
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();

@@ -14,12 +14,12 @@
 //! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
 //! with their worst spots locked ([`simplify_measured`]).
 
-use mres_geom::bvh::{Bvh, Triangle};
-use mres_geom::edges::edge_key;
-use mres_geom::parts::{diagonals, UnionFind};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Simplified};
 use crate::weld::WeldedMesh;
+use mres_geom::bvh::{Bvh, Triangle};
+use mres_geom::edges::edge_key;
+use mres_geom::parts::{diagonals, UnionFind};
 
 /// The sampled distance is scaled by this before it is added: the samples (vertices, edge
 /// midpoints, centroids) miss the largest distance between them, and the next level's samples

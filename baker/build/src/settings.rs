@@ -104,7 +104,7 @@ impl BakeSettings {
         if self.shard_triangles < 1000 {
             return Err(format!("shard_triangles = {} must be at least 1000", self.shard_triangles));
         }
-        if self.max_triangles % 4 != 0 {
+        if !self.max_triangles.is_multiple_of(4) {
             return Err(format!("max_triangles = {} must be a multiple of 4", self.max_triangles));
         }
         let unit = |key: &str, v: f32| {

@@ -22,16 +22,16 @@
 //! mesh's build. Output is deterministic: cells, spill order and shard results depend only on
 //! the input and the settings, never on the thread count.
 
+use crate::dag::{header, level0, to_dag_cluster, BuildStats, Builder, Cluster, StageClock};
 use crate::error::BakeError;
 use crate::progress::Progress;
-use crate::dag::{header, level0, to_dag_cluster, BuildStats, Builder, Cluster, StageClock};
 use crate::settings::BakeSettings;
 use crate::weld::{uv_quant, weld_on, WeldedMesh};
-use mres_import::mesh::{Corner, NONE};
-use mres_import::ImportError;
-use mres_import::mesh::bounds;
 use mres_format::write::EncodedCluster;
 use mres_format::{DagCluster, Grid, Group, Header, Sphere, UvQuant, NO_GROUP};
+use mres_import::mesh::bounds;
+use mres_import::mesh::{Corner, NONE};
+use mres_import::ImportError;
 use mres_import::SourceMesh;
 use rayon::prelude::*;
 use std::fs::File;

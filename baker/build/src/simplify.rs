@@ -2,10 +2,10 @@
 //! (meshopt `simplify_with_attributes_and_locks`, absolute error, normals and UVs weighted),
 //! with a permissive and then a sloppy fallback when the group is stuck (as clusterlod does).
 
-use mres_geom::parts::{diagonals, UnionFind};
 use crate::settings::BakeSettings;
 use crate::weld::WeldedMesh;
 use meshopt::{SimplifyOptions, VertexDataAdapter};
+use mres_geom::parts::{diagonals, UnionFind};
 
 /// Which simplifier produced a group's result.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]

@@ -8,9 +8,9 @@
 //! that replace its level-0 cluster (its drawn ancestors), whichever drawn cluster is nearest
 //! to it. The worst and 99th-percentile ratios are reported.
 
+use mres_format::{select, DecodedCluster, MresFile, NO_GROUP};
 use mres_geom::bvh::Bvh;
 use mres_geom::parts::{diagonals, UnionFind};
-use mres_format::{select, DecodedCluster, MresFile, NO_GROUP};
 use rayon::prelude::*;
 use serde::Serialize;
 

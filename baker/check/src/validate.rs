@@ -12,9 +12,9 @@
 //! per distinct cluster edge.
 
 use crate::conditioning::{conditioning, Conditioning};
+use crate::honesty::Honesty;
 pub use crate::tables::Thresholds;
 use crate::tables::{edge_tables, Edges};
-use crate::honesty::Honesty;
 use mres_format::{select, MresError, MresFile, Sphere, NO_GROUP};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -152,7 +152,10 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
             outputs[c.own_group as usize] += 1;
             let (child, parent) = (&groups[c.own_group as usize], &groups[c.group as usize]);
             report.relations_checked += 1;
-            if !(parent.error >= child.error) {
+            // Written so that a NaN error is a violation too.
+            #[allow(clippy::neg_cmp_op_on_partial_ord)]
+            let below = !(parent.error >= child.error);
+            if below {
                 report.violation(max, || {
                     format!(
                         "cluster {i}: parent group {} error {} < own group {} error {} (monotone errors)",

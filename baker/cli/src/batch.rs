@@ -2,12 +2,12 @@
 //! bake the misses in parallel, write the outputs atomically and report per asset. One bad
 //! asset never stops the others.
 
-use mres_build::bake::bake_file_with_progress;
 use crate::config::PipelineConfig;
-use mres_build::settings::BakeSettings;
 use cache::{CacheKey, KeyInputs, LocalDisk, Lookup, Storage};
-use mres_import::{referenced_files, InputKind};
+use mres_build::bake::bake_file_with_progress;
+use mres_build::settings::BakeSettings;
 use mres_format::MresFile;
+use mres_import::{referenced_files, InputKind};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};

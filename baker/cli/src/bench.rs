@@ -2,11 +2,11 @@
 //! same input, each run by `mres bench` in its own child process so that peak RSS is per
 //! builder. This module holds what one child does.
 
+use meshopt::clusterlod::{clod_build, clod_default_config, ClodMesh};
 use mres_build::bake::bake_mesh;
 use mres_build::settings::BakeSettings;
 use mres_format::{select, MresFile};
 use mres_import::SourceMesh;
-use meshopt::clusterlod::{clod_build, clod_default_config, ClodMesh};
 use serde::Serialize;
 use std::time::Instant;
 

@@ -3,9 +3,9 @@
 //! errors, nested spheres, intact pages — with one root.
 
 use mres_build::bake::{bake_file, bake_mesh};
-use mres_cli::generate;
-use mres_check::validate::{validate, Report, ValidateOptions};
 use mres_build::BakeSettings;
+use mres_check::validate::{validate, Report, ValidateOptions};
+use mres_cli::generate;
 use mres_format::{select, MresFile, NO_GROUP};
 use mres_import::SourceMesh;
 use std::path::{Path, PathBuf};
@@ -42,7 +42,7 @@ fn open_terrain_keeps_its_boundary_in_every_cut() {
     let coarsest = select::uniform_cut(&file.groups, &file.clusters, f32::MAX);
     let triangles: u64 = coarsest.iter().map(|&c| file.clusters[c as usize].triangle_count as u64).sum();
     // 400 locked boundary edges need at least ~400 triangles; far fewer than 20,000.
-    assert!(triangles >= 398 && triangles < 4000, "coarsest cut has {triangles} triangles");
+    assert!((398..4000).contains(&triangles), "coarsest cut has {triangles} triangles");
 }
 
 #[test]
@@ -85,7 +85,7 @@ fn write_two_primitive_gltf(dir: &Path) -> PathBuf {
         |data: Vec<u8>, count: usize, kind: &str, component: u32, target: u32, minmax: Option<([f32; 3], [f32; 3])>| {
             let offset = buffer.len();
             buffer.extend_from_slice(&data);
-            while buffer.len() % 4 != 0 {
+            while !buffer.len().is_multiple_of(4) {
                 buffer.push(0);
             }
             views
@@ -137,7 +137,7 @@ fn gltf_with_two_primitives_and_node_transforms() {
         decoded.iter().flat_map(|d| d.positions.iter().map(|q| file.header.grid.decode(*q)[0])).collect();
     let (lo, hi) = xs.iter().fold((f32::MAX, f32::MIN), |(l, h), &x| (l.min(x), h.max(x)));
     assert!((lo - -11.0).abs() < 1e-3 && (hi - 12.0).abs() < 1e-3, "x range {lo}..{hi}");
-    assert!(xs.iter().all(|&x| x < -8.9 || x > 7.9), "geometry between the instances");
+    assert!(xs.iter().all(|&x| !(-8.9..=7.9).contains(&x)), "geometry between the instances");
 }
 
 fn asset(rel: &str) -> PathBuf {

@@ -3,9 +3,9 @@
 //! bytes whether the OBJ is streamed from the file or imported whole.
 
 use mres_build::bake::{bake_file, bake_mesh};
-use mres_cli::generate;
-use mres_check::validate::{validate, Report, ValidateOptions};
 use mres_build::BakeSettings;
+use mres_check::validate::{validate, Report, ValidateOptions};
+use mres_cli::generate;
 use mres_format::{select, MresFile};
 use mres_import::SourceMesh;
 
@@ -76,7 +76,8 @@ fn sharded_output_is_identical_for_any_thread_count_and_streamed_or_whole() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("sphere.obj");
     let mesh = generate::sphere(40);
-    mres_import::obj_write::write_obj(&mesh, &mut std::io::BufWriter::new(std::fs::File::create(&path).unwrap())).unwrap();
+    mres_import::obj_write::write_obj(&mesh, &mut std::io::BufWriter::new(std::fs::File::create(&path).unwrap()))
+        .unwrap();
     let settings = sharded(3000);
     let bake_with = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();

@@ -48,8 +48,8 @@
 mod gltf;
 pub mod mesh;
 mod obj;
-mod obj_syntax;
 pub mod obj_stream;
+mod obj_syntax;
 pub mod obj_write;
 
 pub use mesh::SourceMesh;
@@ -57,7 +57,6 @@ pub use mesh::SourceMesh;
 use std::fs::File;
 use std::io::Read;
 use std::path::{Component, Path, PathBuf};
-
 
 /// Which importer a path goes to, by extension (case-insensitive): `obj`, `gltf`, `glb`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

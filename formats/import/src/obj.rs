@@ -19,11 +19,11 @@
 use std::io::{BufRead, Cursor, Read};
 use std::path::{Path, PathBuf};
 
+use super::obj_syntax::{out_of_range, record_material};
 use super::{
     asset_dir, check_triangle_count, check_vertex_count, resolve_inside, ImportErrorKind, ImportLimits, KindResult,
     MeshBuilder,
 };
-use super::obj_syntax::{out_of_range, record_material};
 use crate::SourceMesh;
 
 /// What the scan learned about an OBJ file.
@@ -36,7 +36,6 @@ struct Scan {
     /// Byte offsets of keywords to overwrite with `#` (`l`, `mtllib`): tobj ignores them then.
     blank: Vec<usize>,
 }
-
 
 /// The UTF-8 byte order mark some editors put at the start of a text file.
 const BOM: &str = "\u{feff}";

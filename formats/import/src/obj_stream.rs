@@ -19,10 +19,10 @@ use std::io::{BufRead, BufReader};
 use std::path::Path;
 
 use super::obj_syntax::{corner, out_of_range, parse_error, record_material, usemtl_name};
-pub use crate::mesh::{Corner, NONE};
 use super::{
     check_triangle_count, check_vertex_count, unit_or_zero, ImportError, ImportErrorKind, ImportLimits, KindResult,
 };
+pub use crate::mesh::{Corner, NONE};
 
 /// The vertex attributes of an OBJ file and what pass 1 learned about its faces.
 #[derive(Debug, Default)]
@@ -212,7 +212,6 @@ fn position(mut words: std::str::SplitWhitespace<'_>, line_no: usize) -> KindRes
         _ => Err(parse_error(line_no, "v line with 2 or more than 3 values after x y z")),
     }
 }
-
 
 #[cfg(test)]
 mod tests {

@@ -6,8 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
-use mres_import::{import_file, referenced_files, ImportError, ImportErrorKind, ImportLimits};
 use mres_import::SourceMesh;
+use mres_import::{import_file, referenced_files, ImportError, ImportErrorKind, ImportLimits};
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)

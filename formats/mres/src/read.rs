@@ -108,7 +108,7 @@ impl<'a> Cursor<'a> {
 
 /// Returns `bytes[start..start+len]` or a `Truncated` error naming `what`.
 fn section<'a>(bytes: &'a [u8], start: u64, len: u64, what: &str) -> Result<&'a [u8], MresError> {
-    let end = start.checked_add(len).unwrap_or(u64::MAX);
+    let end = start.saturating_add(len);
     if end > bytes.len() as u64 {
         return Err(MresError::Truncated { what: what.into(), start, end, len: bytes.len() as u64 });
     }
@@ -166,7 +166,7 @@ impl MresFile {
         if flags & !(FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS) != 0 {
             return Err(corrupt(format!("header: unknown flags {flags:#x}")));
         }
-        if !(step.is_finite() && step > 0.0) || !origin.iter().chain(&uv_min).chain(&uv_extent).all(|v| v.is_finite()) {
+        if !(step.is_finite() && step > 0.0 && origin.iter().chain(&uv_min).chain(&uv_extent).all(|v| v.is_finite())) {
             return Err(corrupt("header: non-finite or non-positive quantization parameters".into()));
         }
         if flags & FLAG_NORMALS != 0 && !(4..=16).contains(&normal_bits) {
@@ -183,7 +183,7 @@ impl MresFile {
             return Err(corrupt("header: page table does not follow the hierarchy".into()));
         }
         let min_table = page_count as u64 * PAGE_RECORD_SIZE as u64;
-        if page_table_size < min_table || (page_table_size - min_table) % 4 != 0 {
+        if page_table_size < min_table || !(page_table_size - min_table).is_multiple_of(4) {
             return Err(corrupt(format!("header: page table size {page_table_size} for {page_count} pages")));
         }
         let hierarchy = section(&bytes, hierarchy_offset, hierarchy_size, "hierarchy")?;

@@ -402,7 +402,7 @@ fn encode_blocks(
     if vertex_count == 0 || vertex_count > MAX_CLUSTER_VERTICES {
         return Err(bad(format!("{vertex_count} vertices (1..=256 allowed)")));
     }
-    if triangle_count == 0 || triangle_count > MAX_CLUSTER_TRIANGLES || c.indices.len() % 3 != 0 {
+    if triangle_count == 0 || triangle_count > MAX_CLUSTER_TRIANGLES || !c.indices.len().is_multiple_of(3) {
         return Err(bad(format!("{} indices (3..=384, multiple of 3)", c.indices.len())));
     }
     if let Some(i) = c.indices.iter().find(|&&i| i as usize >= vertex_count) {

@@ -227,14 +227,13 @@ impl Device {
         }
         let validation = options.validation;
         let app_name = CString::new("mres-preview")?;
-        let app = vk::ApplicationInfo::default()
-            .application_name(&app_name)
-            .api_version(vk::API_VERSION_1_3);
+        let app = vk::ApplicationInfo::default().application_name(&app_name).api_version(vk::API_VERSION_1_3);
         let layer_ptrs = if validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
         let mut ext_ptrs = if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
         if let Some(display) = options.display {
             ext_ptrs.extend_from_slice(
-                ash_window::enumerate_required_extensions(display).context("this display has no Vulkan surface extension")?,
+                ash_window::enumerate_required_extensions(display)
+                    .context("this display has no Vulkan surface extension")?,
             );
         }
         let enabled_validation = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
@@ -277,10 +276,10 @@ impl Device {
         let memory = unsafe { instance.raw.get_physical_device_memory_properties(physical) };
 
         let priorities = [1.0f32];
-        let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
+        let queues =
+            [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
         let features10 = vk::PhysicalDeviceFeatures::default().shader_float64(true);
-        let mut features13 =
-            vk::PhysicalDeviceVulkan13Features::default()
+        let mut features13 = vk::PhysicalDeviceVulkan13Features::default()
             .dynamic_rendering(true)
             .synchronization2(true)
             // glslang's SPIR-V 1.6 uses LocalSizeId, which needs maintenance4 (required in 1.3).
@@ -344,7 +343,10 @@ impl Device {
     }
 }
 
-fn pick_physical_device(instance: &Instance, options: &ContextOptions) -> Result<(vk::PhysicalDevice, u32, DeviceInfo)> {
+fn pick_physical_device(
+    instance: &Instance,
+    options: &ContextOptions,
+) -> Result<(vk::PhysicalDevice, u32, DeviceInfo)> {
     // SAFETY: enumeration and property queries on a valid instance; the chained structs live
     // on the stack for the duration of each call.
     unsafe {
@@ -356,8 +358,10 @@ fn pick_physical_device(instance: &Instance, options: &ContextOptions) -> Result
             let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
             let mut mesh_props = vk::PhysicalDeviceMeshShaderPropertiesEXT::default();
             let exts = instance.raw.enumerate_device_extension_properties(pd)?;
-            let has_mesh_ext = exts.iter().any(|e| e.extension_name_as_c_str().ok() == Some(ash::ext::mesh_shader::NAME));
-            let has_swapchain = exts.iter().any(|e| e.extension_name_as_c_str().ok() == Some(ash::khr::swapchain::NAME));
+            let has_mesh_ext =
+                exts.iter().any(|e| e.extension_name_as_c_str().ok() == Some(ash::ext::mesh_shader::NAME));
+            let has_swapchain =
+                exts.iter().any(|e| e.extension_name_as_c_str().ok() == Some(ash::khr::swapchain::NAME));
             let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver).push_next(&mut subgroup);
             if has_mesh_ext {
                 props2 = props2.push_next(&mut mesh_props);
@@ -374,8 +378,9 @@ fn pick_physical_device(instance: &Instance, options: &ContextOptions) -> Result
             instance.raw.get_physical_device_features2(pd, &mut f2);
             let f10 = f2.features;
             let families = instance.raw.get_physical_device_queue_family_properties(pd);
-            let family =
-                families.iter().position(|q| q.queue_flags.contains(vk::QueueFlags::GRAPHICS | vk::QueueFlags::COMPUTE));
+            let family = families
+                .iter()
+                .position(|q| q.queue_flags.contains(vk::QueueFlags::GRAPHICS | vk::QueueFlags::COMPUTE));
             let v = props.api_version;
             let api = format!("{}.{}.{}", vk::api_version_major(v), vk::api_version_minor(v), vk::api_version_patch(v));
             let missing: Vec<&str> = [
@@ -428,10 +433,12 @@ fn pick_physical_device(instance: &Instance, options: &ContextOptions) -> Result
             candidates.push((rank, pd, family.unwrap_or(0) as u32, info));
         }
         candidates.sort_by_key(|c| c.0);
-        let (_, pd, family, info) = candidates
-            .into_iter()
-            .next()
-            .ok_or_else(|| anyhow!("no usable Vulkan device ({})", if rejected.is_empty() { "none found".into() } else { rejected.join("; ") }))?;
+        let (_, pd, family, info) = candidates.into_iter().next().ok_or_else(|| {
+            anyhow!(
+                "no usable Vulkan device ({})",
+                if rejected.is_empty() { "none found".into() } else { rejected.join("; ") }
+            )
+        })?;
         Ok((pd, family, info))
     }
 }

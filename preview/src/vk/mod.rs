@@ -10,7 +10,7 @@ mod renderer;
 mod resources;
 mod swapchain;
 
+pub use chain::{ChainFrame, ChainRenderer};
 pub use context::{validation_available, ContextOptions, Device, DeviceInfo, MessageCounts};
 pub use renderer::{DrawPath, Frame, PassTimes, Renderer, RendererOptions, Selection, CLEAR_RGBA, MAX_VISIBLE};
-pub use chain::{ChainFrame, ChainRenderer};
 pub use swapchain::{AcquiredImage, Surface, Swapchain};

@@ -57,12 +57,17 @@ impl Descriptors {
         unsafe {
             let set_layout = DescriptorSetLayout::from_raw(
                 device,
-                device.raw.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings), None)?,
+                device.raw.create_descriptor_set_layout(
+                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                    None,
+                )?,
             );
             let layouts = [set_layout.raw];
             let layout = PipelineLayout::from_raw(
                 device,
-                device.raw.create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&layouts), None)?,
+                device
+                    .raw
+                    .create_pipeline_layout(&vk::PipelineLayoutCreateInfo::default().set_layouts(&layouts), None)?,
             );
             let sizes = [
                 vk::DescriptorPoolSize { ty: vk::DescriptorType::UNIFORM_BUFFER, descriptor_count: 1 },
@@ -70,11 +75,14 @@ impl Descriptors {
             ];
             let pool = DescriptorPool::from_raw(
                 device,
-                device.raw.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)?,
+                device.raw.create_descriptor_pool(
+                    &vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes),
+                    None,
+                )?,
             );
-            let set = device
-                .raw
-                .allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool.raw).set_layouts(&layouts))?[0];
+            let set = device.raw.allocate_descriptor_sets(
+                &vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool.raw).set_layouts(&layouts),
+            )?[0];
             let infos: Vec<[vk::DescriptorBufferInfo; 1]> = bound
                 .iter()
                 .map(|(_, b)| [vk::DescriptorBufferInfo { buffer: b.raw, offset: 0, range: vk::WHOLE_SIZE }])
@@ -83,7 +91,11 @@ impl Descriptors {
                 .iter()
                 .zip(&infos)
                 .map(|(&(b, _), info)| {
-                    vk::WriteDescriptorSet::default().dst_set(set).dst_binding(b).descriptor_type(descriptor_type(b)).buffer_info(info)
+                    vk::WriteDescriptorSet::default()
+                        .dst_set(set)
+                        .dst_binding(b)
+                        .descriptor_type(descriptor_type(b))
+                        .buffer_info(info)
                 })
                 .collect();
             device.raw.update_descriptor_sets(&writes, &[]);
@@ -129,7 +141,9 @@ impl Commands {
                 Some(QueryPool::from_raw(
                     device,
                     device.raw.create_query_pool(
-                        &vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(timestamps),
+                        &vk::QueryPoolCreateInfo::default()
+                            .query_type(vk::QueryType::TIMESTAMP)
+                            .query_count(timestamps),
                         None,
                     )?,
                 ))
@@ -157,7 +171,10 @@ impl Commands {
         // this returns); the fence is unsignalled (reset after each wait).
         unsafe {
             dev.reset_command_buffer(self.cmd, vk::CommandBufferResetFlags::empty())?;
-            dev.begin_command_buffer(self.cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
+            dev.begin_command_buffer(
+                self.cmd,
+                &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+            )?;
             record(dev, self.cmd);
             dev.end_command_buffer(self.cmd)?;
             let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(self.cmd)];
@@ -219,7 +236,14 @@ impl Commands {
         let Some(q) = &self.queries else { return Ok(None) };
         let mut ticks = vec![0u64; self.timestamps as usize];
         // SAFETY: the queries were written by the submission this call follows (fence waited).
-        unsafe { self.device.raw.get_query_pool_results(q.raw, 0, &mut ticks, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT) }?;
+        unsafe {
+            self.device.raw.get_query_pool_results(
+                q.raw,
+                0,
+                &mut ticks,
+                vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+            )
+        }?;
         let period_ms = self.device.info.timestamp_period_ns as f64 * 1e-6;
         Ok(Some(ticks.windows(2).map(|t| t[1].wrapping_sub(t[0]) as f64 * period_ms).collect()))
     }
@@ -259,8 +283,10 @@ pub(crate) fn draw_pipeline(
         .iter()
         .map(|&(stage, spirv)| Ok((stage, ShaderModule::new(device, spirv)?)))
         .collect::<Result<Vec<_>>>()?;
-    let stages: Vec<vk::PipelineShaderStageCreateInfo> =
-        modules.iter().map(|(stage, m)| vk::PipelineShaderStageCreateInfo::default().stage(*stage).module(m.raw).name(c"main")).collect();
+    let stages: Vec<vk::PipelineShaderStageCreateInfo> = modules
+        .iter()
+        .map(|(stage, m)| vk::PipelineShaderStageCreateInfo::default().stage(*stage).module(m.raw).name(c"main"))
+        .collect();
     let vertex_stage = modules.iter().any(|(stage, _)| *stage == vk::ShaderStageFlags::VERTEX);
     let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
     let assembly = vk::PipelineInputAssemblyStateCreateInfo::default().topology(vk::PrimitiveTopology::TRIANGLE_LIST);
@@ -273,12 +299,14 @@ pub(crate) fn draw_pipeline(
         .depth_bias_constant_factor(if back_faces { -16.0 } else { 0.0 })
         .depth_bias_slope_factor(if back_faces { -2.0 } else { 0.0 })
         .line_width(1.0);
-    let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
+    let multisample =
+        vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
     let depth = vk::PipelineDepthStencilStateCreateInfo::default()
         .depth_test_enable(true)
         .depth_write_enable(true)
         .depth_compare_op(vk::CompareOp::GREATER);
-    let blend_attachments = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
+    let blend_attachments =
+        [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
     let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
     let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
     let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);

@@ -9,10 +9,11 @@ use ash::vk;
 use bytemuck::{bytes_of, cast_slice};
 
 use super::context::Device;
-use super::swapchain::{AcquiredImage, Swapchain};
+pub use super::pipelines::COLOR_FORMAT;
+pub(crate) use super::pipelines::DEPTH_FORMAT;
 use super::pipelines::{compute_pipeline, draw_pipeline, Commands, Descriptors};
-pub use super::pipelines::{COLOR_FORMAT, DEPTH_FORMAT};
 use super::resources::{subresource_range, Buffer, Image, Location, Pipeline};
+use super::swapchain::{AcquiredImage, Swapchain};
 use crate::gpu_types::{
     GpuCounters, GpuView, DISPATCH_ARGS_OFFSET, DRAW_ARGS_OFFSET, MESH_ARGS_OFFSET, SELECT_ARGS_OFFSET,
 };
@@ -186,7 +187,10 @@ impl Renderer {
         let mesh_path = match options.path {
             DrawPath::Auto => device.mesh.is_some(),
             DrawPath::Mesh if device.mesh.is_none() => {
-                bail!("the mesh-shader path needs VK_EXT_mesh_shader with task and mesh shaders, which {} lacks", device.info.name)
+                bail!(
+                    "the mesh-shader path needs VK_EXT_mesh_shader with task and mesh shaders, which {} lacks",
+                    device.info.name
+                )
             }
             DrawPath::Mesh => true,
             DrawPath::Fallback => false,
@@ -206,7 +210,11 @@ impl Renderer {
             .min((limit / 8) as u32);
         let index_capacity = options
             .index_capacity
-            .unwrap_or(if instance_count == 1 { scene.index_capacity } else { (scene.index_capacity * instance_count as u64).min(DEFAULT_INDEX_CAP) })
+            .unwrap_or(if instance_count == 1 {
+                scene.index_capacity
+            } else {
+                (scene.index_capacity * instance_count as u64).min(DEFAULT_INDEX_CAP)
+            })
             .clamp(3, u32::MAX as u64 / 4)
             .min(limit / 4) as u32;
         too_big("decompressed pages", scene.pages.len() as u64)?;
@@ -237,7 +245,8 @@ impl Renderer {
             U::STORAGE_BUFFER | U::INDIRECT_BUFFER | U::TRANSFER_DST | U::TRANSFER_SRC,
             Location::Gpu,
         )?;
-        let visible = Buffer::new(device, visible_capacity as u64 * 8, U::STORAGE_BUFFER | U::TRANSFER_SRC, Location::Gpu)?;
+        let visible =
+            Buffer::new(device, visible_capacity as u64 * 8, U::STORAGE_BUFFER | U::TRANSFER_SRC, Location::Gpu)?;
         // The mesh path draws from the visible list alone.
         let index_entries = if mesh_path { 1 } else { index_capacity as u64 };
         let indices = Buffer::new(device, index_entries * 4, U::STORAGE_BUFFER | U::INDEX_BUFFER, Location::Gpu)?;
@@ -250,19 +259,35 @@ impl Renderer {
         // Descriptor set: 0 view (uniform), 1 clusters, 2 page bases, 3 pages, 4 counters,
         // 5 visible, 6 indices, 7 projected, 8 instances, 9 level bins, 10 work items, 11 level
         // order (storage); the same for every pipeline (shaders/common.glsl and each stage).
-        let storage =
-            [&clusters, &page_bases, &pages, &counters, &visible, &indices, &projected, &instance_buffer, &bins, &work, &level_order];
-        let bound: Vec<(u32, &Buffer)> = std::iter::once(&view).chain(storage).enumerate().map(|(i, b)| (i as u32, b)).collect();
+        let storage = [
+            &clusters,
+            &page_bases,
+            &pages,
+            &counters,
+            &visible,
+            &indices,
+            &projected,
+            &instance_buffer,
+            &bins,
+            &work,
+            &level_order,
+        ];
+        let bound: Vec<(u32, &Buffer)> =
+            std::iter::once(&view).chain(storage).enumerate().map(|(i, b)| (i as u32, b)).collect();
         let descriptors = Descriptors::new(device, &bound)?;
         let commands = Commands::new(device, TIMESTAMPS)?;
 
         let pipeline_layout = &descriptors.layout;
         let cull = compute_pipeline(device, pipeline_layout, CULL_SPV)?;
-        let select =
-            compute_pipeline(device, pipeline_layout, if options.naive_arithmetic { SELECT_NAIVE_SPV } else { SELECT_SPV })?;
+        let select = compute_pipeline(
+            device,
+            pipeline_layout,
+            if options.naive_arithmetic { SELECT_NAIVE_SPV } else { SELECT_SPV },
+        )?;
         let expand = compute_pipeline(device, pipeline_layout, EXPAND_SPV)?;
         // The fallback: no vertex input, the vertex shader decodes positions from the pages.
-        let vertex_stages = [(vk::ShaderStageFlags::VERTEX, DRAW_VERT_SPV), (vk::ShaderStageFlags::FRAGMENT, DRAW_FRAG_SPV)];
+        let vertex_stages =
+            [(vk::ShaderStageFlags::VERTEX, DRAW_VERT_SPV), (vk::ShaderStageFlags::FRAGMENT, DRAW_FRAG_SPV)];
         let draw_front = draw_pipeline(device, pipeline_layout, &vertex_stages, false)?;
         let draw_back = draw_pipeline(device, pipeline_layout, &vertex_stages, true)?;
         let mesh_stages = [
@@ -271,7 +296,10 @@ impl Renderer {
             (vk::ShaderStageFlags::FRAGMENT, DRAW_FRAG_SPV),
         ];
         let (mesh_front, mesh_back) = if mesh_path {
-            (Some(draw_pipeline(device, pipeline_layout, &mesh_stages, false)?), Some(draw_pipeline(device, pipeline_layout, &mesh_stages, true)?))
+            (
+                Some(draw_pipeline(device, pipeline_layout, &mesh_stages, false)?),
+                Some(draw_pipeline(device, pipeline_layout, &mesh_stages, true)?),
+            )
         } else {
             (None, None)
         };
@@ -349,26 +377,58 @@ impl Renderer {
             // SAFETY: recording into `cmd` with buffers owned by `self`.
             unsafe {
                 self.record_select(dev, cmd);
-                barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
-                    vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_READ);
+                barrier(
+                    dev,
+                    cmd,
+                    vk::PipelineStageFlags2::COMPUTE_SHADER,
+                    vk::AccessFlags2::SHADER_WRITE,
+                    vk::PipelineStageFlags2::COPY,
+                    vk::AccessFlags2::TRANSFER_READ,
+                );
                 let size = std::mem::size_of::<GpuCounters>() as u64;
-                dev.cmd_copy_buffer(cmd, self.counters.raw, self.readback_counters.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size }]);
-                dev.cmd_copy_buffer(cmd, self.visible.raw, self.readback_visible.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: self.visible_capacity as u64 * 8 }]);
+                dev.cmd_copy_buffer(
+                    cmd,
+                    self.counters.raw,
+                    self.readback_counters.raw,
+                    &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size }],
+                );
+                dev.cmd_copy_buffer(
+                    cmd,
+                    self.visible.raw,
+                    self.readback_visible.raw,
+                    &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: self.visible_capacity as u64 * 8 }],
+                );
                 if want_projected {
-                    dev.cmd_copy_buffer(cmd, self.projected.raw, self.readback_projected.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: n * 8 }]);
+                    dev.cmd_copy_buffer(
+                        cmd,
+                        self.projected.raw,
+                        self.readback_projected.raw,
+                        &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size: n * 8 }],
+                    );
                 }
-                barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
-                    vk::PipelineStageFlags2::HOST, vk::AccessFlags2::HOST_READ);
+                barrier(
+                    dev,
+                    cmd,
+                    vk::PipelineStageFlags2::COPY,
+                    vk::AccessFlags2::TRANSFER_WRITE,
+                    vk::PipelineStageFlags2::HOST,
+                    vk::AccessFlags2::HOST_READ,
+                );
             }
         })?;
         let counters = self.read_counters()?;
         if counters.dropped > 0 || counters.visible_count > self.visible_capacity {
-            bail!("the visible list ({} entries) overflowed: {} clusters selected", self.visible_capacity, counters.visible_count);
+            bail!(
+                "the visible list ({} entries) overflowed: {} clusters selected",
+                self.visible_capacity,
+                counters.visible_count
+            );
         }
-        let visible: Vec<u32> = cast_slice::<u8, [u32; 2]>(&self.readback_visible.read(counters.visible_count as usize * 8)?)
-            .iter()
-            .map(|e| e[0])
-            .collect();
+        let visible: Vec<u32> =
+            cast_slice::<u8, [u32; 2]>(&self.readback_visible.read(counters.visible_count as usize * 8)?)
+                .iter()
+                .map(|e| e[0])
+                .collect();
         let projected = if want_projected {
             cast_slice::<u8, [f32; 2]>(&self.readback_projected.read(self.cluster_count as usize * 8)?).to_vec()
         } else {
@@ -388,7 +448,13 @@ impl Renderer {
     /// to present: the submission waits on [`AcquiredImage::acquired`] and signals
     /// [`AcquiredImage::rendered`]. With `screenshot`, [`Frame::rgba`] holds the swapchain
     /// image as presented (converted to RGBA), which needs [`Swapchain::readable`].
-    pub fn render_to_swapchain(&mut self, view: &GpuView, swapchain: &Swapchain, image: &AcquiredImage, screenshot: bool) -> Result<Frame> {
+    pub fn render_to_swapchain(
+        &mut self,
+        view: &GpuView,
+        swapchain: &Swapchain,
+        image: &AcquiredImage,
+        screenshot: bool,
+    ) -> Result<Frame> {
         if screenshot && !swapchain.readable {
             bail!("this surface's images cannot be read back (no TRANSFER_SRC usage)");
         }
@@ -415,7 +481,14 @@ impl Renderer {
         self.render_frame(view, width, height, true, None)
     }
 
-    fn render_frame(&mut self, view: &GpuView, width: u32, height: u32, want_depth: bool, present: Option<&PresentTarget>) -> Result<Frame> {
+    fn render_frame(
+        &mut self,
+        view: &GpuView,
+        width: u32,
+        height: u32,
+        want_depth: bool,
+        present: Option<&PresentTarget>,
+    ) -> Result<Frame> {
         self.prepare_view(view)?;
         self.ensure_target(width, height)?;
         if let Some(p) = present {
@@ -426,11 +499,17 @@ impl Renderer {
         // Presentation: wait for the image to be acquired before the blit writes it (the
         // barrier below chains to this stage), signal presentation when everything is done.
         let waits: Vec<vk::SemaphoreSubmitInfo> = present
-            .map(|p| vk::SemaphoreSubmitInfo::default().semaphore(p.image.acquired).stage_mask(vk::PipelineStageFlags2::BLIT))
+            .map(|p| {
+                vk::SemaphoreSubmitInfo::default().semaphore(p.image.acquired).stage_mask(vk::PipelineStageFlags2::BLIT)
+            })
             .into_iter()
             .collect();
         let signals: Vec<vk::SemaphoreSubmitInfo> = present
-            .map(|p| vk::SemaphoreSubmitInfo::default().semaphore(p.image.rendered).stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS))
+            .map(|p| {
+                vk::SemaphoreSubmitInfo::default()
+                    .semaphore(p.image.rendered)
+                    .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
+            })
             .into_iter()
             .collect();
         self.commands.submit_with(&waits, &signals, |dev, cmd| {
@@ -439,32 +518,63 @@ impl Renderer {
             unsafe {
                 self.commands.start_timestamps(dev, cmd);
                 self.record_select(dev, cmd);
-                barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
+                barrier(
+                    dev,
+                    cmd,
+                    vk::PipelineStageFlags2::COMPUTE_SHADER,
+                    vk::AccessFlags2::SHADER_WRITE,
                     vk::PipelineStageFlags2::COMPUTE_SHADER | vk::PipelineStageFlags2::DRAW_INDIRECT,
-                    vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE | vk::AccessFlags2::INDIRECT_COMMAND_READ);
+                    vk::AccessFlags2::SHADER_READ
+                        | vk::AccessFlags2::SHADER_WRITE
+                        | vk::AccessFlags2::INDIRECT_COMMAND_READ,
+                );
                 self.commands.timestamp(dev, cmd, 1);
                 if self.mesh_path {
-                    barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
-                        vk::PipelineStageFlags2::DRAW_INDIRECT | vk::PipelineStageFlags2::TASK_SHADER_EXT
-                            | vk::PipelineStageFlags2::MESH_SHADER_EXT | vk::PipelineStageFlags2::FRAGMENT_SHADER,
-                        vk::AccessFlags2::INDIRECT_COMMAND_READ | vk::AccessFlags2::SHADER_READ);
+                    barrier(
+                        dev,
+                        cmd,
+                        vk::PipelineStageFlags2::COMPUTE_SHADER,
+                        vk::AccessFlags2::SHADER_WRITE,
+                        vk::PipelineStageFlags2::DRAW_INDIRECT
+                            | vk::PipelineStageFlags2::TASK_SHADER_EXT
+                            | vk::PipelineStageFlags2::MESH_SHADER_EXT
+                            | vk::PipelineStageFlags2::FRAGMENT_SHADER,
+                        vk::AccessFlags2::INDIRECT_COMMAND_READ | vk::AccessFlags2::SHADER_READ,
+                    );
                 } else {
                     dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.expand.raw);
                     dev.cmd_dispatch_indirect(cmd, self.counters.raw, DISPATCH_ARGS_OFFSET);
-                    barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
-                        vk::PipelineStageFlags2::DRAW_INDIRECT | vk::PipelineStageFlags2::INDEX_INPUT
-                            | vk::PipelineStageFlags2::VERTEX_SHADER | vk::PipelineStageFlags2::FRAGMENT_SHADER,
-                        vk::AccessFlags2::INDIRECT_COMMAND_READ | vk::AccessFlags2::INDEX_READ | vk::AccessFlags2::SHADER_READ);
+                    barrier(
+                        dev,
+                        cmd,
+                        vk::PipelineStageFlags2::COMPUTE_SHADER,
+                        vk::AccessFlags2::SHADER_WRITE,
+                        vk::PipelineStageFlags2::DRAW_INDIRECT
+                            | vk::PipelineStageFlags2::INDEX_INPUT
+                            | vk::PipelineStageFlags2::VERTEX_SHADER
+                            | vk::PipelineStageFlags2::FRAGMENT_SHADER,
+                        vk::AccessFlags2::INDIRECT_COMMAND_READ
+                            | vk::AccessFlags2::INDEX_READ
+                            | vk::AccessFlags2::SHADER_READ,
+                    );
                 }
                 self.commands.timestamp(dev, cmd, 2);
                 let to_attachment = [
-                    image_barrier(&target.color, vk::ImageAspectFlags::COLOR,
-                        vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT, vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
-                        vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL),
-                    image_barrier(&target.depth, vk::ImageAspectFlags::DEPTH,
+                    image_barrier(
+                        &target.color,
+                        vk::ImageAspectFlags::COLOR,
+                        vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT,
+                        vk::AccessFlags2::COLOR_ATTACHMENT_WRITE,
+                        vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                    ),
+                    image_barrier(
+                        &target.depth,
+                        vk::ImageAspectFlags::DEPTH,
                         vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS,
-                        vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                        vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL),
+                        vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ
+                            | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                        vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+                    ),
                 ];
                 dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_attachment));
                 let color = [vk::RenderingAttachmentInfo::default()
@@ -478,28 +588,44 @@ impl Renderer {
                     .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
                     .load_op(vk::AttachmentLoadOp::CLEAR)
                     .store_op(if want_depth { vk::AttachmentStoreOp::STORE } else { vk::AttachmentStoreOp::DONT_CARE })
-                    .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } });
+                    .clear_value(vk::ClearValue {
+                        depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 },
+                    });
                 let area = vk::Rect2D { offset: vk::Offset2D { x: 0, y: 0 }, extent };
-                dev.cmd_begin_rendering(cmd, &vk::RenderingInfo::default()
-                    .render_area(area)
-                    .layer_count(1)
-                    .color_attachments(&color)
-                    .depth_attachment(&depth));
+                dev.cmd_begin_rendering(
+                    cmd,
+                    &vk::RenderingInfo::default()
+                        .render_area(area)
+                        .layer_count(1)
+                        .color_attachments(&color)
+                        .depth_attachment(&depth),
+                );
                 // Negative height: y up, as in the projection (Vulkan 1.1 core).
-                dev.cmd_set_viewport(cmd, 0, &[vk::Viewport {
-                    x: 0.0,
-                    y: extent.height as f32,
-                    width: extent.width as f32,
-                    height: -(extent.height as f32),
-                    min_depth: 0.0,
-                    max_depth: 1.0,
-                }]);
+                dev.cmd_set_viewport(
+                    cmd,
+                    0,
+                    &[vk::Viewport {
+                        x: 0.0,
+                        y: extent.height as f32,
+                        width: extent.width as f32,
+                        height: -(extent.height as f32),
+                        min_depth: 0.0,
+                        max_depth: 1.0,
+                    }],
+                );
                 dev.cmd_set_scissor(cmd, 0, &[area]);
                 match (&self.mesh_front, &self.mesh_back, &self.device.mesh) {
                     (Some(front), Some(back), Some(mesh)) if self.mesh_path => {
                         for pipeline in [front, back] {
                             dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
-                            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.descriptors.layout.raw, 0, &[self.descriptors.set], &[]);
+                            dev.cmd_bind_descriptor_sets(
+                                cmd,
+                                vk::PipelineBindPoint::GRAPHICS,
+                                self.descriptors.layout.raw,
+                                0,
+                                &[self.descriptors.set],
+                                &[],
+                            );
                             mesh.cmd_draw_mesh_tasks_indirect(cmd, self.counters.raw, MESH_ARGS_OFFSET, 1, 12);
                         }
                     }
@@ -507,7 +633,14 @@ impl Renderer {
                         dev.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT32);
                         for pipeline in [&self.draw_front, &self.draw_back] {
                             dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
-                            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::GRAPHICS, self.descriptors.layout.raw, 0, &[self.descriptors.set], &[]);
+                            dev.cmd_bind_descriptor_sets(
+                                cmd,
+                                vk::PipelineBindPoint::GRAPHICS,
+                                self.descriptors.layout.raw,
+                                0,
+                                &[self.descriptors.set],
+                                &[],
+                            );
                             dev.cmd_draw_indexed_indirect(cmd, self.counters.raw, DRAW_ARGS_OFFSET, 1, 20);
                         }
                     }
@@ -528,12 +661,23 @@ impl Renderer {
                     buffer_offset: 0,
                     buffer_row_length: 0,
                     buffer_image_height: 0,
-                    image_subresource: vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::COLOR, mip_level: 0, base_array_layer: 0, layer_count: 1 },
+                    image_subresource: vk::ImageSubresourceLayers {
+                        aspect_mask: vk::ImageAspectFlags::COLOR,
+                        mip_level: 0,
+                        base_array_layer: 0,
+                        layer_count: 1,
+                    },
                     image_offset: vk::Offset3D { x: 0, y: 0, z: 0 },
                     image_extent: vk::Extent3D { width: extent.width, height: extent.height, depth: 1 },
                 }];
                 if !self.no_readback {
-                    dev.cmd_copy_image_to_buffer(cmd, target.color.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, target.readback.raw, &region);
+                    dev.cmd_copy_image_to_buffer(
+                        cmd,
+                        target.color.raw,
+                        vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                        target.readback.raw,
+                        &region,
+                    );
                 }
                 if let Some(p) = present {
                     self.record_present(dev, cmd, &target.color, p, &region);
@@ -550,18 +694,46 @@ impl Renderer {
                         .subresource_range(subresource_range(vk::ImageAspectFlags::DEPTH))];
                     dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_copy));
                     let region = [vk::BufferImageCopy {
-                        image_subresource: vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::DEPTH, mip_level: 0, base_array_layer: 0, layer_count: 1 },
+                        image_subresource: vk::ImageSubresourceLayers {
+                            aspect_mask: vk::ImageAspectFlags::DEPTH,
+                            mip_level: 0,
+                            base_array_layer: 0,
+                            layer_count: 1,
+                        },
                         ..region[0]
                     }];
-                    dev.cmd_copy_image_to_buffer(cmd, target.depth.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, target.depth_readback.raw, &region);
+                    dev.cmd_copy_image_to_buffer(
+                        cmd,
+                        target.depth.raw,
+                        vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                        target.depth_readback.raw,
+                        &region,
+                    );
                 }
                 // The counters were last read as indirect arguments.
-                barrier(dev, cmd, vk::PipelineStageFlags2::DRAW_INDIRECT, vk::AccessFlags2::INDIRECT_COMMAND_READ,
-                    vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_READ);
+                barrier(
+                    dev,
+                    cmd,
+                    vk::PipelineStageFlags2::DRAW_INDIRECT,
+                    vk::AccessFlags2::INDIRECT_COMMAND_READ,
+                    vk::PipelineStageFlags2::COPY,
+                    vk::AccessFlags2::TRANSFER_READ,
+                );
                 let size = std::mem::size_of::<GpuCounters>() as u64;
-                dev.cmd_copy_buffer(cmd, self.counters.raw, self.readback_counters.raw, &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size }]);
-                barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
-                    vk::PipelineStageFlags2::HOST, vk::AccessFlags2::HOST_READ);
+                dev.cmd_copy_buffer(
+                    cmd,
+                    self.counters.raw,
+                    self.readback_counters.raw,
+                    &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size }],
+                );
+                barrier(
+                    dev,
+                    cmd,
+                    vk::PipelineStageFlags2::COPY,
+                    vk::AccessFlags2::TRANSFER_WRITE,
+                    vk::PipelineStageFlags2::HOST,
+                    vk::AccessFlags2::HOST_READ,
+                );
             }
         })?;
         let counters = self.read_counters()?;
@@ -577,7 +749,11 @@ impl Renderer {
             _ if self.no_readback => Vec::new(),
             _ => target.readback.read(pixels * 4)?,
         };
-        let depth = if want_depth { Some(cast_slice::<u8, f32>(&target.depth_readback.read(pixels * 4)?).to_vec()) } else { None };
+        let depth = if want_depth {
+            Some(cast_slice::<u8, f32>(&target.depth_readback.read(pixels * 4)?).to_vec())
+        } else {
+            None
+        };
         let times = self.read_times()?;
         let clusters = counters.visible_count.min(self.visible_capacity);
         Ok(Frame {
@@ -611,7 +787,11 @@ impl Renderer {
     }
 
     fn read_times(&self) -> Result<Option<PassTimes>> {
-        Ok(self.commands.read_intervals_ms()?.map(|ms| PassTimes { select_ms: ms[0], expand_ms: ms[1], draw_ms: ms[2] }))
+        Ok(self.commands.read_intervals_ms()?.map(|ms| PassTimes {
+            select_ms: ms[0],
+            expand_ms: ms[1],
+            draw_ms: ms[2],
+        }))
     }
 
     fn ensure_target(&mut self, width: u32, height: u32) -> Result<()> {
@@ -623,13 +803,32 @@ impl Renderer {
             bail!("image size {width}x{height} out of range (1..=16384)");
         }
         self.target = None;
-        let color = Image::new(&self.device, extent, COLOR_FORMAT,
-            vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC, vk::ImageAspectFlags::COLOR)?;
-        let depth = Image::new(&self.device, extent, DEPTH_FORMAT,
-            vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC, vk::ImageAspectFlags::DEPTH)?;
-        let readback = Buffer::new(&self.device, width as u64 * height as u64 * 4, vk::BufferUsageFlags::TRANSFER_DST, Location::Readback)?;
-        let depth_readback =
-            Buffer::new(&self.device, width as u64 * height as u64 * 4, vk::BufferUsageFlags::TRANSFER_DST, Location::Readback)?;
+        let color = Image::new(
+            &self.device,
+            extent,
+            COLOR_FORMAT,
+            vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
+            vk::ImageAspectFlags::COLOR,
+        )?;
+        let depth = Image::new(
+            &self.device,
+            extent,
+            DEPTH_FORMAT,
+            vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
+            vk::ImageAspectFlags::DEPTH,
+        )?;
+        let readback = Buffer::new(
+            &self.device,
+            width as u64 * height as u64 * 4,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            Location::Readback,
+        )?;
+        let depth_readback = Buffer::new(
+            &self.device,
+            width as u64 * height as u64 * 4,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            Location::Readback,
+        )?;
         self.target = Some(RenderTarget { color, depth, readback, depth_readback });
         Ok(())
     }
@@ -638,7 +837,8 @@ impl Renderer {
         let bytes = present.extent.width as u64 * present.extent.height as u64 * 4;
         if present.screenshot && self.present_readback.as_ref().is_none_or(|b| b.size < bytes) {
             self.present_readback = None;
-            self.present_readback = Some(Buffer::new(&self.device, bytes, vk::BufferUsageFlags::TRANSFER_DST, Location::Readback)?);
+            self.present_readback =
+                Some(Buffer::new(&self.device, bytes, vk::BufferUsageFlags::TRANSFER_DST, Location::Readback)?);
         }
         Ok(())
     }
@@ -650,7 +850,14 @@ impl Renderer {
     /// # Safety
     /// `cmd` must be recording, on `dev`; `color` must be this renderer's colour target, of
     /// the swapchain's extent, after the barrier that makes it a transfer source.
-    unsafe fn record_present(&self, dev: &ash::Device, cmd: vk::CommandBuffer, color: &Image, present: &PresentTarget, region: &[vk::BufferImageCopy; 1]) {
+    unsafe fn record_present(
+        &self,
+        dev: &ash::Device,
+        cmd: vk::CommandBuffer,
+        color: &Image,
+        present: &PresentTarget,
+        region: &[vk::BufferImageCopy; 1],
+    ) {
         let range = subresource_range(vk::ImageAspectFlags::COLOR);
         // The submission waits on the acquire semaphore at BLIT: this barrier chains to it.
         let to_dst = [vk::ImageMemoryBarrier2::default()
@@ -662,7 +869,12 @@ impl Renderer {
             .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
             .image(present.image.image)
             .subresource_range(range)];
-        let layers = vk::ImageSubresourceLayers { aspect_mask: vk::ImageAspectFlags::COLOR, mip_level: 0, base_array_layer: 0, layer_count: 1 };
+        let layers = vk::ImageSubresourceLayers {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            mip_level: 0,
+            base_array_layer: 0,
+            layer_count: 1,
+        };
         let corner = vk::Offset3D { x: color.extent.width as i32, y: color.extent.height as i32, z: 1 };
         let blit = [vk::ImageBlit {
             src_subresource: layers,
@@ -673,8 +885,15 @@ impl Renderer {
         // SAFETY: per this function's contract; the swapchain image was acquired for this frame.
         unsafe {
             dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_dst));
-            dev.cmd_blit_image(cmd, color.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, present.image.image,
-                vk::ImageLayout::TRANSFER_DST_OPTIMAL, &blit, vk::Filter::NEAREST);
+            dev.cmd_blit_image(
+                cmd,
+                color.raw,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                present.image.image,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &blit,
+                vk::Filter::NEAREST,
+            );
             let mut layout = vk::ImageLayout::TRANSFER_DST_OPTIMAL;
             let (mut stage, mut access) = (vk::PipelineStageFlags2::BLIT, vk::AccessFlags2::TRANSFER_WRITE);
             if let (true, Some(readback)) = (present.screenshot, &self.present_readback) {
@@ -688,9 +907,21 @@ impl Renderer {
                     .image(present.image.image)
                     .subresource_range(range)];
                 dev.cmd_pipeline_barrier2(cmd, &vk::DependencyInfo::default().image_memory_barriers(&to_src));
-                dev.cmd_copy_image_to_buffer(cmd, present.image.image, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, readback.raw, region);
-                barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
-                    vk::PipelineStageFlags2::HOST, vk::AccessFlags2::HOST_READ);
+                dev.cmd_copy_image_to_buffer(
+                    cmd,
+                    present.image.image,
+                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                    readback.raw,
+                    region,
+                );
+                barrier(
+                    dev,
+                    cmd,
+                    vk::PipelineStageFlags2::COPY,
+                    vk::AccessFlags2::TRANSFER_WRITE,
+                    vk::PipelineStageFlags2::HOST,
+                    vk::AccessFlags2::HOST_READ,
+                );
                 layout = vk::ImageLayout::TRANSFER_SRC_OPTIMAL;
                 (stage, access) = (vk::PipelineStageFlags2::COPY, vk::AccessFlags2::NONE);
             }
@@ -721,14 +952,34 @@ impl Renderer {
             // The counters are read as indirect arguments by the previous frame's commands,
             // which completed before this submission (fence), and written below.
             dev.cmd_update_buffer(cmd, self.counters.raw, 0, bytes_of(&GpuCounters::reset()));
-            barrier(dev, cmd, vk::PipelineStageFlags2::COPY, vk::AccessFlags2::TRANSFER_WRITE,
-                vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE);
+            barrier(
+                dev,
+                cmd,
+                vk::PipelineStageFlags2::COPY,
+                vk::AccessFlags2::TRANSFER_WRITE,
+                vk::PipelineStageFlags2::COMPUTE_SHADER,
+                vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE,
+            );
             dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.cull.raw);
-            dev.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.descriptors.layout.raw, 0, &[self.descriptors.set], &[]);
+            dev.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                self.descriptors.layout.raw,
+                0,
+                &[self.descriptors.set],
+                &[],
+            );
             dev.cmd_dispatch(cmd, gx, gy, 1);
-            barrier(dev, cmd, vk::PipelineStageFlags2::COMPUTE_SHADER, vk::AccessFlags2::SHADER_WRITE,
+            barrier(
+                dev,
+                cmd,
+                vk::PipelineStageFlags2::COMPUTE_SHADER,
+                vk::AccessFlags2::SHADER_WRITE,
                 vk::PipelineStageFlags2::COMPUTE_SHADER | vk::PipelineStageFlags2::DRAW_INDIRECT,
-                vk::AccessFlags2::SHADER_READ | vk::AccessFlags2::SHADER_WRITE | vk::AccessFlags2::INDIRECT_COMMAND_READ);
+                vk::AccessFlags2::SHADER_READ
+                    | vk::AccessFlags2::SHADER_WRITE
+                    | vk::AccessFlags2::INDIRECT_COMMAND_READ,
+            );
             dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.select.raw);
             dev.cmd_dispatch_indirect(cmd, self.counters.raw, SELECT_ARGS_OFFSET);
         }

@@ -37,7 +37,13 @@ impl Buffer {
         let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
         // SAFETY: valid device and create info; the handle is destroyed in Drop (or below on error).
         let raw = unsafe { device.raw.create_buffer(&info, None) }.context("vkCreateBuffer")?;
-        let mut buffer = Buffer { device: device.clone(), raw, memory: vk::DeviceMemory::null(), size, mapped: std::ptr::null_mut() };
+        let mut buffer = Buffer {
+            device: device.clone(),
+            raw,
+            memory: vk::DeviceMemory::null(),
+            size,
+            mapped: std::ptr::null_mut(),
+        };
         // SAFETY: `raw` is a live buffer of this device.
         let req = unsafe { device.raw.get_buffer_memory_requirements(raw) };
         use vk::MemoryPropertyFlags as M;
@@ -71,7 +77,12 @@ impl Buffer {
     /// Copies `data` to the start of a mapped buffer.
     pub fn write(&self, data: &[u8]) -> Result<()> {
         if self.mapped.is_null() || data.len() as u64 > self.size {
-            bail!("buffer write of {} bytes into a {} buffer of {} bytes", data.len(), if self.mapped.is_null() { "unmapped" } else { "mapped" }, self.size);
+            bail!(
+                "buffer write of {} bytes into a {} buffer of {} bytes",
+                data.len(),
+                if self.mapped.is_null() { "unmapped" } else { "mapped" },
+                self.size
+            );
         }
         // SAFETY: the mapping covers `size` bytes and does not overlap `data` (a Rust slice).
         unsafe { std::ptr::copy_nonoverlapping(data.as_ptr(), self.mapped, data.len()) };
@@ -146,8 +157,11 @@ impl Image {
         };
         // SAFETY: `raw` is a live image of this device.
         let req = unsafe { device.raw.get_image_memory_requirements(raw) };
-        let type_index =
-            device.memory_type(req.memory_type_bits, vk::MemoryPropertyFlags::empty(), vk::MemoryPropertyFlags::DEVICE_LOCAL)?;
+        let type_index = device.memory_type(
+            req.memory_type_bits,
+            vk::MemoryPropertyFlags::empty(),
+            vk::MemoryPropertyFlags::DEVICE_LOCAL,
+        )?;
         let alloc = vk::MemoryAllocateInfo::default().allocation_size(req.size).memory_type_index(type_index);
         // SAFETY: as for buffers; freed in Drop.
         image.memory = unsafe { device.raw.allocate_memory(&alloc, None) }?;
@@ -166,7 +180,13 @@ impl Image {
 
 /// The single mip level and layer of an image with `aspect`.
 pub fn subresource_range(aspect: vk::ImageAspectFlags) -> vk::ImageSubresourceRange {
-    vk::ImageSubresourceRange { aspect_mask: aspect, base_mip_level: 0, level_count: 1, base_array_layer: 0, layer_count: 1 }
+    vk::ImageSubresourceRange {
+        aspect_mask: aspect,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: 0,
+        layer_count: 1,
+    }
 }
 
 impl Drop for Image {
@@ -247,7 +267,8 @@ impl Semaphore {
     pub fn new(device: &Arc<Device>) -> Result<Semaphore> {
         // SAFETY: default create info; the handle goes straight into its owner.
         unsafe {
-            let raw = device.raw.create_semaphore(&vk::SemaphoreCreateInfo::default(), None).context("vkCreateSemaphore")?;
+            let raw =
+                device.raw.create_semaphore(&vk::SemaphoreCreateInfo::default(), None).context("vkCreateSemaphore")?;
             Ok(Semaphore::from_raw(device, raw))
         }
     }

@@ -39,7 +39,10 @@ impl Surface {
     /// Creates a surface for `window` on `device`'s instance and checks that the device's queue
     /// can present to it. The device must have been created with
     /// [`super::ContextOptions::display`] set to this window's display.
-    pub fn new<W: HasWindowHandle + HasDisplayHandle + Send + Sync + 'static>(device: &Arc<Device>, window: Arc<W>) -> Result<Arc<Surface>> {
+    pub fn new<W: HasWindowHandle + HasDisplayHandle + Send + Sync + 'static>(
+        device: &Arc<Device>,
+        window: Arc<W>,
+    ) -> Result<Arc<Surface>> {
         if !device.info.swapchain_enabled {
             bail!("the Vulkan device was created without a display (ContextOptions::display)");
         }
@@ -118,7 +121,13 @@ const PREFERRED_FORMATS: [vk::Format; 2] = [vk::Format::B8G8R8A8_UNORM, vk::Form
 impl Swapchain {
     /// Creates a swapchain of `width` × `height` pixels (the surface's own extent where it has
     /// one), FIFO presentation (vsync), replacing `old` if given (which the caller then drops).
-    pub fn new(device: &Arc<Device>, surface: &Arc<Surface>, width: u32, height: u32, old: Option<&Swapchain>) -> Result<Swapchain> {
+    pub fn new(
+        device: &Arc<Device>,
+        surface: &Arc<Surface>,
+        width: u32,
+        height: u32,
+        old: Option<&Swapchain>,
+    ) -> Result<Swapchain> {
         let pd = device.physical;
         let loader = ash::khr::swapchain::Device::new(&device.instance.raw, &device.raw);
         // SAFETY: queries on a live surface and physical device of the same instance.
@@ -158,11 +167,17 @@ impl Swapchain {
         if caps.max_image_count > 0 {
             image_count = image_count.min(caps.max_image_count);
         }
-        let usage = vk::ImageUsageFlags::TRANSFER_DST | if readable { vk::ImageUsageFlags::TRANSFER_SRC } else { vk::ImageUsageFlags::empty() };
-        let alpha = [vk::CompositeAlphaFlagsKHR::OPAQUE, vk::CompositeAlphaFlagsKHR::INHERIT, vk::CompositeAlphaFlagsKHR::PRE_MULTIPLIED, vk::CompositeAlphaFlagsKHR::POST_MULTIPLIED]
-            .into_iter()
-            .find(|a| caps.supported_composite_alpha.contains(*a))
-            .unwrap_or(vk::CompositeAlphaFlagsKHR::OPAQUE);
+        let usage = vk::ImageUsageFlags::TRANSFER_DST
+            | if readable { vk::ImageUsageFlags::TRANSFER_SRC } else { vk::ImageUsageFlags::empty() };
+        let alpha = [
+            vk::CompositeAlphaFlagsKHR::OPAQUE,
+            vk::CompositeAlphaFlagsKHR::INHERIT,
+            vk::CompositeAlphaFlagsKHR::PRE_MULTIPLIED,
+            vk::CompositeAlphaFlagsKHR::POST_MULTIPLIED,
+        ]
+        .into_iter()
+        .find(|a| caps.supported_composite_alpha.contains(*a))
+        .unwrap_or(vk::CompositeAlphaFlagsKHR::OPAQUE);
         let info = vk::SwapchainCreateInfoKHR::default()
             .surface(surface.raw)
             .min_image_count(image_count)
@@ -205,7 +220,8 @@ impl Swapchain {
     pub fn acquire(&self) -> Result<Option<AcquiredImage>> {
         // SAFETY: the semaphore is unsignalled: the previous frame's submission waited on it,
         // and that submission's fence was waited for before this call.
-        let result = unsafe { self.loader.acquire_next_image(self.raw, u64::MAX, self.acquired.raw, vk::Fence::null()) };
+        let result =
+            unsafe { self.loader.acquire_next_image(self.raw, u64::MAX, self.acquired.raw, vk::Fence::null()) };
         match result {
             // A suboptimal image is still presentable; `present` reports it.
             Ok((index, _suboptimal)) => Ok(Some(AcquiredImage {
@@ -225,7 +241,8 @@ impl Swapchain {
         let waits = [image.rendered];
         let swapchains = [self.raw];
         let indices = [image.index];
-        let info = vk::PresentInfoKHR::default().wait_semaphores(&waits).swapchains(&swapchains).image_indices(&indices);
+        let info =
+            vk::PresentInfoKHR::default().wait_semaphores(&waits).swapchains(&swapchains).image_indices(&indices);
         // SAFETY: the image was acquired from this swapchain and a submission that signals
         // `rendered` (and leaves the image in PRESENT_SRC_KHR) was queued before this call.
         match unsafe { self.loader.queue_present(self.device.queue, &info) } {

@@ -2,10 +2,10 @@
 //! skipping what the content-addressed cache already holds.
 
 use anyhow::{Context, Result};
-use mres_cli::batch::{find_assets, AssetReport, Batch};
-use mres_cli::config::{PipelineConfig, DEFAULT_PIPELINE_TOML};
 use clap::Parser;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use mres_cli::batch::{find_assets, AssetReport, Batch};
+use mres_cli::config::{PipelineConfig, DEFAULT_PIPELINE_TOML};
 use std::collections::{HashMap, HashSet};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};

@@ -1,10 +1,10 @@
 //! `mres`: validate, inspect, export and benchmark `.mres` files.
 
 use anyhow::{bail, Context, Result};
-use mres_cli::bench::{run_clusterlod, run_mres, BuilderRun, CUT_THRESHOLDS};
-use mres_check::validate::{validate, ValidateOptions};
-use mres_build::BakeSettings;
 use clap::{Parser, Subcommand};
+use mres_build::BakeSettings;
+use mres_check::validate::{validate, ValidateOptions};
+use mres_cli::bench::{run_clusterlod, run_mres, BuilderRun, CUT_THRESHOLDS};
 use mres_format::{select, MresFile, NO_GROUP};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
