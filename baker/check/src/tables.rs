@@ -1,5 +1,5 @@
 //! The tables the checks share: the validator's thresholds ([`Thresholds`]) and the file's
-//! edges welded by grid position ([`Edges`], built by [`edge_tables`]).
+//! edges welded by grid position (`Edges`, built by `edge_tables`).
 
 use mres_format::{MresFile, NO_GROUP};
 use rayon::prelude::*;
