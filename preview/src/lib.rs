@@ -1,5 +1,5 @@
 //! `mres-preview`: renders `.mres` files through the GPU selection path an engine would use
-//! (DESIGN.md "The preview renderer").
+//! (docs/ARCHITECTURE.md, "preview").
 //!
 //! - [`scene`] flattens a file into GPU inputs: one [`gpu_types::GpuCluster`] per cluster and
 //!   the decompressed pages as is, with a page base table.

@@ -1,4 +1,4 @@
-//! The windowed viewer (issue #5, item 1): a winit window whose frames go through the same
+//! The windowed viewer: a winit window whose frames go through the same
 //! [`Renderer`] as the headless renders (selection, expansion or mesh shaders, draw), blitted
 //! into the swapchain ([`Renderer::render_to_swapchain`]).
 //!

@@ -1,4 +1,4 @@
-//! DESIGN.md invariant 3, a well-conditioned DAG (Cignoni et al., "Batched Multi-Triangulation";
+//! docs/INVARIANTS.md §3, a well-conditioned DAG (Cignoni et al., "Batched Multi-Triangulation";
 //! Pettett §3.1.4): depth against log2 of the leaf count, triangle reduction and cluster growth
 //! per level, no cluster with the same boundary as one of its children, group sizes, and
 //! **edge age** — how many levels an original edge survives.

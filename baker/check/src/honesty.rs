@@ -1,4 +1,4 @@
-//! DESIGN.md invariant 4, honest errors: a cluster drawn in a cut stands in for the original
+//! docs/INVARIANTS.md §4, honest errors: a cluster drawn in a cut stands in for the original
 //! surface under it, and its own group's stored error must bound how far apart the two are.
 //!
 //! For a few uniform cuts (thresholds at quantiles of the stored errors), points are sampled

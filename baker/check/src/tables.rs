@@ -9,22 +9,22 @@ use serde::Serialize;
 /// Every threshold the validator enforces, in one place. Defaults and why:
 #[derive(Clone, Debug, Serialize)]
 pub struct Thresholds {
-    /// Invariant 3: levels ≤ `max_depth_factor` · log2(level-0 clusters) + `depth_slack`. Halving
+    /// docs/INVARIANTS.md §3: levels ≤ `max_depth_factor` · log2(level-0 clusters) + `depth_slack`. Halving
     /// per level gives a factor of 1 (clusters halve); 2 allows stuck groups and small tops.
     pub max_depth_factor: f64,
     /// See `max_depth_factor`.
     pub depth_slack: f64,
-    /// Invariant 3: most clusters in a non-root group (Nanite's upper bound).
+    /// docs/INVARIANTS.md §3: most clusters in a non-root group (Nanite's upper bound).
     pub max_group_size: u32,
-    /// Invariant 3: mean edge age, in levels (Pettett's exact partitioning reached 1.05; issue
-    /// #4 accepts 1.5).
+    /// docs/INVARIANTS.md §3: mean edge age, in levels (Pettett's exact partitioning reached 1.05; 1.5
+    /// leaves room for stuck groups).
     pub max_edge_age_mean: f64,
-    /// Invariant 3: most clusters (as a fraction of derived clusters) with the same boundary as
+    /// docs/INVARIANTS.md §3: most clusters (as a fraction of derived clusters) with the same boundary as
     /// a child. A few occur where a small member had all its vertices locked (next to holes,
     /// whose edges stay locked: 2% on a sphere with 200 holes); many would mean borders stay
     /// put across levels.
     pub max_same_boundary_fraction: f64,
-    /// Invariant 4: largest measured distance / stored error over the sampled cuts. The baker
+    /// docs/INVARIANTS.md §4: largest measured distance / stored error over the sampled cuts. The baker
     /// stores, per group, its members' error plus the sampled two-sided distance between its
     /// output and its input (`deviation`), rounded up: by the triangle inequality that bounds
     /// the distance to the original, and it samples the points this check samples (centroids
@@ -32,7 +32,7 @@ pub struct Thresholds {
     /// the sample assets, the CI's nasty cases and the Stanford dragon; it was 1.6–2.6, 3.8 and
     /// 40 with meshoptimizer's estimates.
     pub max_error_ratio: f64,
-    /// Invariant 4: uniform cuts measured and points sampled per cut and direction.
+    /// docs/INVARIANTS.md §4: uniform cuts measured and points sampled per cut and direction.
     pub honesty_cuts: usize,
     /// See `honesty_cuts`.
     pub honesty_samples: usize,

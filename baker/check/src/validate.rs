@@ -1,5 +1,6 @@
-//! Validation of a `.mres` file: DESIGN.md invariants 1 (every cut crack-free), 2 (monotone
-//! errors, nested spheres), 3 (well-conditioned DAG, in `conditioning`) and 5 (format integrity).
+//! Validation of a `.mres` file against docs/INVARIANTS.md: §1 (every cut crack-free), §2
+//! (monotone errors, nested spheres), §3 (well-conditioned DAG, in `conditioning`), §4 (honest
+//! errors, in `honesty`) and §5 (format integrity).
 //!
 //! Crack check: the original surface is the union of the level-0 clusters. Edges are welded by
 //! grid position. A cut is crack-free iff the original's open and non-manifold edges appear in
@@ -31,7 +32,7 @@ pub struct ValidateOptions {
     pub seed: u64,
     /// Most violations listed in the report (all are counted).
     pub max_listed: usize,
-    /// The thresholds of invariants 3 and 4.
+    /// The thresholds of docs/INVARIANTS.md §3 and §4.
     pub thresholds: Thresholds,
 }
 
@@ -95,9 +96,9 @@ pub struct Report {
     pub violation_count: u64,
     /// The first violations, each naming the group/cluster and the broken invariant.
     pub violations: Vec<String>,
-    /// Invariant 3 figures.
+    /// Conditioning figures (docs/INVARIANTS.md §3).
     pub conditioning: Conditioning,
-    /// Invariant 4 figures.
+    /// Honesty figures (docs/INVARIANTS.md §4).
     pub honesty: Honesty,
     /// The thresholds applied.
     pub thresholds: Thresholds,
@@ -132,7 +133,7 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
     let groups = &file.groups;
     let clusters = &file.clusters;
 
-    // Shape figures and invariant 2.
+    // Shape figures and monotone errors, nested spheres (§2).
     let cluster_level = |c: &mres_format::ClusterInfo| {
         if c.own_group == NO_GROUP {
             0
@@ -198,7 +199,7 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
     report.level0_fill = level0.triangles as f64 / level0.clusters.max(1) as f64;
 
     let edges = edge_tables(file, &decoded);
-    // Invariant 3.
+    // Conditioning (§3).
     let (shape, problems) = conditioning(file, &decoded, &edges, &options.thresholds);
     report.conditioning = shape;
     report.thresholds = options.thresholds.clone();
@@ -206,7 +207,7 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
         report.violation(max, || p);
     }
 
-    // Invariant 4.
+    // Honesty (§4).
     let t = &options.thresholds;
     report.honesty = crate::honesty::measure(file, &decoded, t.honesty_cuts, t.honesty_samples);
     if report.honesty.worst_ratio > t.max_error_ratio {
@@ -219,7 +220,7 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
         });
     }
 
-    // Invariant 1: cuts.
+    // Crack-free cuts (§1).
     let mut thresholds: Vec<f32> = groups.iter().map(|g| g.error).filter(|e| e.is_finite()).collect();
     thresholds.push(0.0);
     thresholds.sort_by(f32::total_cmp);
