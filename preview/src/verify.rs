@@ -14,9 +14,9 @@
 //!    therefore lie within `depth_error_factor` times that bound of the range of depths of the
 //!    full-detail render within ceil(τ) + 1 pixels of p (a range, not the nearest depth: at
 //!    grazing angles neighbouring pixel centres differ far more than the error); a background
-//!    pixel must find background there. The
-//!    factor is the validator's documented error-honesty tolerance (the stored errors are
-//!    meshoptimizer's estimates, measured up to 3.8× off on small closed boxes).
+//!    pixel must find background there. The stored errors are measured bounds (the validator's
+//!    honesty limit is 1.0, docs/INVARIANTS.md §4); the factor is kept above 1 because the depth
+//!    comparison is approximate at silhouettes (preview/README.md).
 
 use std::path::PathBuf;
 
