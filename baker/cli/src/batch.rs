@@ -195,8 +195,8 @@ impl Batch<'_> {
                         if let Ok(file) = MresFile::parse(bytes) {
                             report.input_triangles = file.header.source_triangles;
                             report.level0_triangles = level0_triangles(&file);
-                            report.degenerate_dropped = dropped
-                                .unwrap_or(report.input_triangles.saturating_sub(report.level0_triangles));
+                            report.degenerate_dropped =
+                                dropped.unwrap_or(report.input_triangles.saturating_sub(report.level0_triangles));
                             report.levels = file.header.level_count;
                             report.clusters = file.clusters.len() as u64;
                             report.groups = file.groups.len() as u64;

@@ -221,7 +221,11 @@ pub fn summarize(file: &MresFile) -> Result<Summary, MresError> {
         per_level: per_level(file, diagonal),
         uniform_cuts: CUT_FRACTIONS
             .iter()
-            .map(|&f| Cut { fraction_of_diagonal: f, error: f * diagonal, triangles: cut_triangles(file, f * diagonal) })
+            .map(|&f| Cut {
+                fraction_of_diagonal: f,
+                error: f * diagonal,
+                triangles: cut_triangles(file, f * diagonal),
+            })
             .collect(),
         cut_triangles_at_extent_fraction: CUT_FRACTIONS.iter().map(|&f| (f, cut_triangles(file, f * extent))).collect(),
     })
@@ -232,7 +236,7 @@ pub fn count(n: u64) -> String {
     let digits = n.to_string();
     let mut out = String::new();
     for (i, d) in digits.chars().enumerate() {
-        if i > 0 && (digits.len() - i) % 3 == 0 {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
             out.push(',');
         }
         out.push(d);
@@ -245,6 +249,8 @@ pub fn sig(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
         return format!("{x}");
     }
+    // Rounded first, so that 0.01f32 (0.00999999977) prints as 0.0100, not 0.01000.
+    let x: f64 = format!("{x:.2e}").parse().unwrap_or(x);
     let exponent = x.abs().log10().floor() as i32;
     if (-3..6).contains(&exponent) {
         format!("{:.*}", (2 - exponent).max(0) as usize, x)
@@ -326,14 +332,14 @@ impl Summary {
         let _ = writeln!(s, "\nper level (a uniform cut at error E replaces a group's clusters once E >= its error):");
         let _ = writeln!(
             s,
-            "{:>6} {:>8} {:>10} {:>12}  {:<24} {:<22}",
+            "{:>6} {:>12} {:>10} {:>12}  {:<24} {:<22}",
             "level", "groups", "clusters", "triangles", "group error (object)", "group error / diagonal"
         );
         for l in &self.per_level {
             let roots = if l.root_groups > 0 { format!(" ({} root)", l.root_groups) } else { String::new() };
             let _ = writeln!(
                 s,
-                "{:>6} {:>8} {:>10} {:>12}  {:<24} {:<22}",
+                "{:>6} {:>12} {:>10} {:>12}  {:<24} {:<22}",
                 l.level,
                 format!("{}{roots}", count(l.groups)),
                 count(l.clusters),
@@ -373,8 +379,10 @@ mod tests {
         assert_eq!(sig(0.0012345), "0.00123");
         assert_eq!(sig(1.5e-7), "1.50e-7");
         assert_eq!(sig(2.0), "2.00");
-        assert_eq!(sig(12345.0), "12345");
+        assert_eq!(sig(12345.0), "12300");
         assert_eq!(sig(-0.5), "-0.500");
         assert_eq!(sig(0.1f32 as f64), "0.100");
+        assert_eq!(sig(0.01f32 as f64), "0.0100");
+        assert_eq!(sig(0.9996), "1.00");
     }
 }

@@ -53,8 +53,11 @@ pub fn find_assets(root: &Path, exclude: &[PathBuf], config: Option<&Path>) -> s
 
 fn walk(dir: &Path, exclude: &[PathBuf], assets: &mut Vec<PathBuf>, others: &mut Vec<PathBuf>) -> std::io::Result<()> {
     let with_dir = |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", dir.display()));
-    let mut entries: Vec<PathBuf> =
-        std::fs::read_dir(dir).map_err(with_dir)?.map(|e| e.map(|e| e.path())).collect::<Result<_, _>>().map_err(with_dir)?;
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(with_dir)?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<Result<_, _>>()
+        .map_err(with_dir)?;
     entries.sort();
     for path in entries {
         if path.is_dir() {
@@ -116,7 +119,8 @@ fn mtl_textures(mtl: &Path) -> Vec<PathBuf> {
         .filter_map(|line| {
             let mut words = line.split_whitespace();
             let keyword = words.next()?;
-            let is_texture = keyword.starts_with("map_") || ["bump", "disp", "decal", "norm", "refl"].contains(&keyword);
+            let is_texture =
+                keyword.starts_with("map_") || ["bump", "disp", "decal", "norm", "refl"].contains(&keyword);
             is_texture.then(|| words.last()).flatten().map(|name| dir.join(name.replace('\\', "/")))
         })
         .collect()
@@ -179,7 +183,9 @@ fn percent_decode(uri: &str) -> String {
 /// deleted since they were baked. Sorted; empty if `dir` does not exist.
 pub fn stale_outputs(dir: &Path, expected: &HashSet<PathBuf>) -> std::io::Result<Vec<PathBuf>> {
     fn walk(dir: &Path, expected: &HashSet<PathBuf>, stale: &mut Vec<PathBuf>) -> std::io::Result<()> {
-        for entry in std::fs::read_dir(dir).map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", dir.display())))? {
+        for entry in
+            std::fs::read_dir(dir).map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?
+        {
             let path = entry?.path();
             if path.is_dir() {
                 walk(&path, expected, stale)?;
@@ -211,7 +217,11 @@ mod tests {
         std::fs::create_dir(root.join("tex")).unwrap();
         std::fs::write(root.join("tex/a.png"), "").unwrap();
         std::fs::write(root.join("sub/n.png"), "").unwrap();
-        std::fs::write(root.join("m.gltf"), r#"{"asset":{"version":"2.0"},"images":[{"uri":"i%20j.jpg"},{"uri":"data:x"}]}"#).unwrap();
+        std::fs::write(
+            root.join("m.gltf"),
+            r#"{"asset":{"version":"2.0"},"images":[{"uri":"i%20j.jpg"},{"uri":"data:x"}]}"#,
+        )
+        .unwrap();
         std::fs::write(root.join("i j.jpg"), "").unwrap();
         std::fs::write(root.join("pipeline.toml"), "").unwrap();
         std::fs::write(root.join("sub/pipeline.toml"), "").unwrap();
@@ -220,7 +230,8 @@ mod tests {
         let found = find_assets(root, &[], Some(&root.join("pipeline.toml"))).unwrap();
         assert_eq!(found.assets, [root.join("a.obj"), root.join("m.gltf")]);
         assert_eq!(found.companions, 5, "a.mtl, two textures of it, one glTF image, the settings");
-        let skipped: Vec<_> = found.skipped.iter().map(|s| (s.path.strip_prefix(root).unwrap(), s.reason.as_str())).collect();
+        let skipped: Vec<_> =
+            found.skipped.iter().map(|s| (s.path.strip_prefix(root).unwrap(), s.reason.as_str())).collect();
         assert_eq!(skipped.len(), 3, "{skipped:?}");
         assert_eq!(skipped[0].0, Path::new("sub/pipeline.toml"));
         assert!(skipped[0].1.contains("not used"), "{}", skipped[0].1);

@@ -275,7 +275,8 @@ fn position_bits(file: &Path) -> u64 {
 fn settings_are_found_above_a_subfolder_or_a_file_and_outputs_mirror_the_tree() {
     let t = tree();
     let config = t.assets.join("pipeline.toml");
-    std::fs::write(&config, "[bake]\nposition_bits = 12\n[[override]]\nglob = \"scans/**\"\nposition_bits = 14\n").unwrap();
+    std::fs::write(&config, "[bake]\nposition_bits = 12\n[[override]]\nglob = \"scans/**\"\nposition_bits = 14\n")
+        .unwrap();
     let canonical = config.canonicalize().unwrap();
     let whole = t.bake(&["--no-cache"]);
     assert_eq!(whole["config"], canonical.to_str().unwrap());
@@ -341,7 +342,10 @@ fn stale_outputs_are_listed_and_pruned_and_nothing_else_is_touched() {
     assert!(stale.is_file(), "listed, not deleted, without --prune");
     let (code, msg) = bake_all(&[t.assets.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache"]);
     assert_eq!(code, Some(0));
-    assert!(msg.contains("warning: 1 stale .mres files") && msg.contains("ball.mres") && msg.contains("--prune"), "{msg}");
+    assert!(
+        msg.contains("warning: 1 stale .mres files") && msg.contains("ball.mres") && msg.contains("--prune"),
+        "{msg}"
+    );
     // A subfolder's batch only looks at its own part of the output directory.
     let scans = t.assets.join("scans");
     let (_, msg) = bake_all(&[scans.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache"]);
@@ -403,8 +407,13 @@ fn an_unusable_output_directory_or_report_fails_before_any_bake() {
     let blocker = t.out.with_file_name("blocker");
     std::fs::write(&blocker, "a file, not a directory").unwrap();
     let bad_out = blocker.join("out");
-    let (code, msg) =
-        bake_all(&[t.assets.to_str().unwrap(), "-o", bad_out.to_str().unwrap(), "--cache-dir", t.cache.to_str().unwrap()]);
+    let (code, msg) = bake_all(&[
+        t.assets.to_str().unwrap(),
+        "-o",
+        bad_out.to_str().unwrap(),
+        "--cache-dir",
+        t.cache.to_str().unwrap(),
+    ]);
     assert_eq!(code, Some(2), "{msg}");
     assert!(msg.contains(bad_out.to_str().unwrap()), "{msg}");
     assert!(!t.cache.exists(), "nothing was baked into the cache");

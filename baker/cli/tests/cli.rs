@@ -231,12 +231,23 @@ fn inspect_summarises_levels_and_cuts_without_float_noise() {
 
     let r = run(MRES, &["inspect", file.to_str().unwrap()]);
     let out = String::from_utf8_lossy(&r.stdout).into_owned();
-    for needle in ["4,800 input, 4,800 at level 0, 0 degenerate dropped", "normals (10-bit octahedral), no UVs, no materials", "per level", "E / diagonal"] {
+    for needle in [
+        "4,800 input, 4,800 at level 0, 0 degenerate dropped",
+        "normals (10-bit octahedral), no UVs, no materials",
+        "per level",
+        "E / diagonal",
+    ] {
         assert!(out.contains(needle), "{needle:?} not in:\n{out}");
     }
-    assert_eq!(out.lines().filter(|l| l.trim_start().starts_with(|c: char| c.is_ascii_digit())).count(), levels.len() + cuts.len(), "{out}");
+    assert_eq!(
+        out.lines().filter(|l| l.trim_start().starts_with(|c: char| c.is_ascii_digit())).count(),
+        levels.len() + cuts.len(),
+        "{out}"
+    );
     // No float noise: no number with more than 5 digits after the point.
-    let noisy = out.split(|c: char| !(c.is_ascii_digit() || c == '.')).find(|w| w.split('.').nth(1).is_some_and(|f| f.len() > 5));
+    let noisy = out
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .find(|w| w.split('.').nth(1).is_some_and(|f| f.len() > 5));
     assert_eq!(noisy, None, "{out}");
 }
 
@@ -254,7 +265,15 @@ fn every_command_counts_input_triangles_alike_and_reports_degenerates() {
     let bake = || {
         let o = run(
             BAKE_ALL,
-            &[obj.to_str().unwrap(), "-o", dir.path().to_str().unwrap(), "--report", report.to_str().unwrap(), "--cache-dir", cache.to_str().unwrap()],
+            &[
+                obj.to_str().unwrap(),
+                "-o",
+                dir.path().to_str().unwrap(),
+                "--report",
+                report.to_str().unwrap(),
+                "--cache-dir",
+                cache.to_str().unwrap(),
+            ],
         );
         assert!(o.status.success(), "{}", text(&o));
         let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
@@ -263,7 +282,11 @@ fn every_command_counts_input_triangles_alike_and_reports_degenerates() {
     for (msg, r) in [bake(), bake()] {
         // Baked, then from the cache: the same figures.
         assert!(msg.contains("202 input triangles (2 degenerate dropped)"), "{msg}");
-        assert_eq!((r["input_triangles"].as_u64(), r["level0_triangles"].as_u64(), r["degenerate_dropped"].as_u64()), (Some(202), Some(200), Some(2)), "{r:#}");
+        assert_eq!(
+            (r["input_triangles"].as_u64(), r["level0_triangles"].as_u64(), r["degenerate_dropped"].as_u64()),
+            (Some(202), Some(200), Some(2)),
+            "{r:#}"
+        );
         assert_eq!(r["assets"][0]["degenerate_dropped"], 2);
     }
     let file = dir.path().join("t.mres");
@@ -274,7 +297,10 @@ fn every_command_counts_input_triangles_alike_and_reports_degenerates() {
     assert!(text(&t).contains("202 input triangles (200 at level 0, 2 degenerate dropped)"), "{}", text(&t));
     let i = run(MRES, &["inspect", file.to_str().unwrap(), "--json"]);
     let i: serde_json::Value = serde_json::from_slice(&i.stdout).unwrap();
-    assert_eq!((i["input_triangles"].as_u64(), i["level0_triangles"].as_u64(), i["degenerate_dropped"].as_u64()), (Some(202), Some(200), Some(2)));
+    assert_eq!(
+        (i["input_triangles"].as_u64(), i["level0_triangles"].as_u64(), i["degenerate_dropped"].as_u64()),
+        (Some(202), Some(200), Some(2))
+    );
     let bench = dir.path().join("bench.json");
     let b = run(MRES, &["bench", obj.to_str().unwrap(), "--report", bench.to_str().unwrap()]);
     assert!(b.status.success(), "{}", text(&b));

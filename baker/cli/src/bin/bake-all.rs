@@ -59,7 +59,9 @@ struct Cli {
     #[arg(long, value_name = "FILE")]
     report: Option<PathBuf>,
     /// Delete the stale .mres files of the output directory: those that no asset under the
-    /// input produces. Only .mres files, only under the output directory.
+    /// input produces. Only .mres files, only under the output directory (the part of it that
+    /// mirrors the input), which is taken to hold this tree's outputs alone: bake a subfolder
+    /// into the tree's output directory only where a pipeline.toml marks the tree's root.
     #[arg(long)]
     prune: bool,
     /// Only print failures, warnings and the summary.
@@ -137,7 +139,10 @@ impl Setup {
         let input_root = if directory {
             cli.input.clone()
         } else {
-            Some(cli.input.parent().unwrap_or(Path::new(""))).filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf()
+            Some(cli.input.parent().unwrap_or(Path::new("")))
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new("."))
+                .to_path_buf()
         };
         let config_path = match &cli.config {
             Some(path) => Some(path.clone()),
@@ -258,7 +263,9 @@ fn unmatched_globs(setup: &Setup) -> Vec<String> {
         .config
         .unmatched_overrides(&relatives)
         .iter()
-        .map(|o| format!("{origin}: [[override]] glob {:?} matches no asset under {}", o.glob, setup.input_root.display()))
+        .map(|o| {
+            format!("{origin}: [[override]] glob {:?} matches no asset under {}", o.glob, setup.input_root.display())
+        })
         .collect()
 }
 

@@ -298,7 +298,12 @@ fn main() -> ExitCode {
 
 fn validate_cmd(a: ValidateArgs) -> Result<ExitCode> {
     let f = open(&a.file)?;
-    let options = ValidateOptions { random_cuts: a.random_cuts, uniform_cuts: a.uniform_cuts, seed: a.seed, ..Default::default() };
+    let options = ValidateOptions {
+        random_cuts: a.random_cuts,
+        uniform_cuts: a.uniform_cuts,
+        seed: a.seed,
+        ..Default::default()
+    };
     let report = validate(&f, &options).with_context(|| format!("{}", a.file.display()))?;
     let level0 = mres_cli::batch::level0_triangles(&f);
     if a.json {
@@ -335,7 +340,11 @@ fn print_validate(file: &Path, report: &mres_check::validate::Report, level0: u6
     }
     println!(
         "cuts checked: {} uniform, {} random; cracked {}; relations checked {}; most pinched edges in a cut {}",
-        report.uniform_cuts, report.random_cuts, report.cracked_cuts, report.relations_checked, report.max_pinched_edges
+        report.uniform_cuts,
+        report.random_cuts,
+        report.cracked_cuts,
+        report.relations_checked,
+        report.max_pinched_edges
     );
     let c = &report.conditioning;
     println!(
@@ -424,7 +433,13 @@ fn cache_cmd(a: CacheArgs) -> Result<ExitCode> {
         CacheAction::Stats => {
             let s = disk.stats()?;
             let value = serde_json::json!({ "entries": s.entries, "bytes": s.bytes, "temp_files": s.temp_files });
-            let text = format!("{}: {} entries, {} bytes, {} temporary files", dir.display(), s.entries, s.bytes, s.temp_files);
+            let text = format!(
+                "{}: {} entries, {} bytes, {} temporary files",
+                dir.display(),
+                s.entries,
+                s.bytes,
+                s.temp_files
+            );
             (value, text, ExitCode::SUCCESS)
         }
         CacheAction::Verify { repair } => {
@@ -542,7 +557,16 @@ fn print_bench(a: &BenchArgs, best: &[BuilderRun; 2]) {
     );
     println!(
         "{:<11} {:>8} {:>8} {:>10} {:>8} {:>6} {:>6} {:>6} {:>10}  triangles per uniform cut at {:?} × diagonal",
-        "builder", "total s", "DAG s", "peak MiB", "RSS B/tri", "levels", "roots", "fill", "level-0 tri", CUT_THRESHOLDS
+        "builder",
+        "total s",
+        "DAG s",
+        "peak MiB",
+        "RSS B/tri",
+        "levels",
+        "roots",
+        "fill",
+        "level-0 tri",
+        CUT_THRESHOLDS
     );
     for r in best {
         println!(
