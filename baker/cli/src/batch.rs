@@ -7,7 +7,7 @@ use cache::{CacheKey, KeyInputs, LocalDisk, Lookup, Storage};
 use mres_build::bake::bake_file_with_progress;
 use mres_build::settings::BakeSettings;
 use mres_format::MresFile;
-use mres_import::{referenced_files, InputKind};
+use mres_import::referenced_files;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -16,30 +16,6 @@ use std::time::Instant;
 /// Bumped whenever the baker's output for the same input and settings would change; part of
 /// every cache key.
 pub const BAKER_VERSION: u32 = 3;
-
-/// The mesh files under `root` (sorted) and how many other files were skipped.
-pub fn find_assets(root: &Path) -> std::io::Result<(Vec<PathBuf>, usize)> {
-    fn walk(dir: &Path, found: &mut Vec<PathBuf>, skipped: &mut usize) -> std::io::Result<()> {
-        let mut entries: Vec<_> = std::fs::read_dir(dir)
-            .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?
-            .collect::<Result<_, _>>()?;
-        entries.sort_by_key(|e| e.path());
-        for e in entries {
-            let path = e.path();
-            if path.is_dir() {
-                walk(&path, found, skipped)?;
-            } else if InputKind::from_path(&path).is_some() {
-                found.push(path);
-            } else {
-                *skipped += 1;
-            }
-        }
-        Ok(())
-    }
-    let (mut found, mut skipped) = (Vec::new(), 0);
-    walk(root, &mut found, &mut skipped)?;
-    Ok((found, skipped))
-}
 
 /// What happened to one asset.
 #[derive(Clone, Debug, Serialize)]
@@ -52,8 +28,13 @@ pub struct AssetReport {
     pub status: &'static str,
     /// The error, on failure: names the file and the problem.
     pub error: Option<String>,
-    /// Triangles of the source mesh.
+    /// Input triangles: the source's triangles after triangulation, before degenerate ones are
+    /// dropped (the file header's `source_triangles`), the figure every command reports.
     pub input_triangles: u64,
+    /// Triangles of level 0 (the welded source, without its degenerate triangles).
+    pub level0_triangles: u64,
+    /// Triangles dropped as degenerate (by the importer or on the position grid).
+    pub degenerate_dropped: u64,
     /// DAG levels.
     pub levels: u32,
     /// Clusters.
@@ -78,8 +59,12 @@ pub struct AssetReport {
 
 /// Everything one batch needs.
 pub struct Batch<'a> {
-    /// Asset root: outputs mirror the tree below it.
-    pub root: &'a Path,
+    /// The directory the assets were found in (a single file's directory).
+    pub input_root: &'a Path,
+    /// Where `input_root` lies under the asset root (the directory of the settings file, when
+    /// the input is inside it): outputs and override globs use `prefix/` + the path below
+    /// `input_root`, so that baking a subfolder writes what baking the whole tree writes.
+    pub prefix: &'a Path,
     /// Output directory.
     pub out_dir: &'a Path,
     /// Settings and overrides.
@@ -127,6 +112,17 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 }
 
 impl Batch<'_> {
+    /// The path of `input` under the asset root.
+    pub fn relative(&self, input: &Path) -> PathBuf {
+        let below = input.strip_prefix(self.input_root).unwrap_or(input);
+        self.prefix.join(below)
+    }
+
+    /// The `.mres` file `input` is baked to.
+    pub fn output_for(&self, input: &Path) -> PathBuf {
+        self.out_dir.join(self.relative(input)).with_extension("mres")
+    }
+
     /// Processes every asset in parallel; `progress` is called after each one.
     pub fn run(&self, assets: &[PathBuf], progress: impl Fn(&AssetReport) + Sync) -> Vec<AssetReport> {
         assets
@@ -141,15 +137,16 @@ impl Batch<'_> {
 
     fn process(&self, input: &Path) -> AssetReport {
         let start = Instant::now();
-        let relative = input.strip_prefix(self.root).unwrap_or(input);
-        let output = self.out_dir.join(relative).with_extension("mres");
-        let settings = self.config.settings_for(relative);
+        let output = self.output_for(input);
+        let settings = self.config.settings_for(&self.relative(input));
         let mut report = AssetReport {
             input: input.to_path_buf(),
             output: None,
             status: "failed",
             error: None,
             input_triangles: 0,
+            level0_triangles: 0,
+            degenerate_dropped: 0,
             levels: 0,
             clusters: 0,
             groups: 0,
@@ -161,6 +158,8 @@ impl Batch<'_> {
             cache_hit: false,
             cache_repaired: false,
         };
+        // Dropped degenerates are known from the bake; for a cache hit they are derived below.
+        let mut dropped = None;
         let result = (|| -> Result<Vec<u8>, String> {
             let key = match self.cache {
                 Some(_) => Some(cache_key(input, &settings)?),
@@ -179,6 +178,7 @@ impl Batch<'_> {
             let baked = bake_file_with_progress(input, &settings, &|line| (self.stage)(input, line))
                 .map_err(|e| e.to_string())?;
             report.shards = Some(baked.stats.build.shards);
+            dropped = Some(baked.stats.degenerate_dropped);
             if let (Some(cache), Some(key)) = (self.cache, &key) {
                 cache.put(key, &baked.bytes).map_err(|e| format!("cache: {e}"))?;
             }
@@ -194,6 +194,9 @@ impl Batch<'_> {
                         report.output = Some(output.clone());
                         if let Ok(file) = MresFile::parse(bytes) {
                             report.input_triangles = file.header.source_triangles;
+                            report.level0_triangles = level0_triangles(&file);
+                            report.degenerate_dropped =
+                                dropped.unwrap_or(report.input_triangles.saturating_sub(report.level0_triangles));
                             report.levels = file.header.level_count;
                             report.clusters = file.clusters.len() as u64;
                             report.groups = file.groups.len() as u64;
@@ -216,4 +219,9 @@ impl Batch<'_> {
         report.seconds = start.elapsed().as_secs_f64();
         report
     }
+}
+
+/// Triangles of the level-0 clusters (those no group's simplification produced).
+pub fn level0_triangles(file: &MresFile) -> u64 {
+    file.clusters.iter().filter(|c| c.own_group == mres_format::NO_GROUP).map(|c| c.triangle_count as u64).sum()
 }

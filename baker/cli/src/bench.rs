@@ -26,8 +26,15 @@ pub struct BuilderRun {
     pub dag_seconds: f64,
     /// Peak resident set of the whole child process (import included), bytes.
     pub peak_rss_bytes: u64,
-    /// Input triangles.
+    /// Input triangles: the source's triangles after triangulation, before degenerate ones
+    /// are dropped (what a bake's `.mres` header calls `source_triangles`).
     pub input_triangles: u64,
+    /// Triangles of the builder's level 0 (for ours the welded source, without degenerates).
+    #[serde(default)]
+    pub level0_triangles: u64,
+    /// Input triangles dropped as degenerate: `input_triangles - level0_triangles`.
+    #[serde(default)]
+    pub degenerate_dropped: u64,
     /// DAG levels.
     pub levels: u32,
     /// Clusters in the top (infinite-error) groups.
@@ -57,7 +64,7 @@ fn diagonal(mesh: &SourceMesh) -> f32 {
 
 /// Runs our builder.
 pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<BuilderRun> {
-    let input_triangles = mesh.triangle_count() as u64;
+    let input_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
     let diag = diagonal(&mesh);
     let start = Instant::now();
     let baked = bake_mesh(mesh, settings)?;
@@ -67,12 +74,15 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
     let file = MresFile::parse(baked.bytes)?;
     let tri = |cut: Vec<u32>| cut.iter().map(|&c| file.clusters[c as usize].triangle_count as u64).sum();
     let level0: Vec<_> = file.clusters.iter().filter(|c| c.own_group == mres_format::NO_GROUP).collect();
+    let level0_triangles = crate::batch::level0_triangles(&file);
     Ok(BuilderRun {
         builder: "mres".into(),
         seconds,
         dag_seconds,
         peak_rss_bytes: peak_rss(),
         input_triangles,
+        level0_triangles,
+        degenerate_dropped: input_triangles.saturating_sub(level0_triangles),
         levels: file.header.level_count,
         root_clusters: baked.stats.build.root_clusters,
         level0_fill: level0.iter().map(|c| c.triangle_count as f64).sum::<f64>() / level0.len().max(1) as f64,
@@ -87,7 +97,7 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
 /// Runs clusterlod with its default configuration for 128-triangle clusters, with the same
 /// attribute weights we use (normals and UVs when present).
 pub fn run_clusterlod(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<BuilderRun> {
-    let input_triangles = mesh.triangle_count() as u64;
+    let input_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
     let diag = diagonal(&mesh);
     let start = Instant::now();
     let bytes = meshopt::typed_to_bytes(&mesh.positions);
@@ -133,12 +143,15 @@ pub fn run_clusterlod(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Resu
             .sum()
     };
     let level0: Vec<_> = clusters.iter().filter(|c| c.1 < 0).collect();
+    let level0_triangles = level0.iter().map(|c| c.2 as u64).sum::<u64>();
     Ok(BuilderRun {
         builder: "clusterlod".into(),
         seconds,
         dag_seconds: seconds,
         peak_rss_bytes: peak_rss(),
         input_triangles,
+        level0_triangles,
+        degenerate_dropped: input_triangles.saturating_sub(level0_triangles),
         levels: groups.iter().map(|g| g.0 + 1).max().unwrap_or(0) as u32,
         root_clusters: clusters.iter().filter(|c| groups[c.0].1 == f32::MAX).count() as u64,
         level0_fill: level0.iter().map(|c| c.2 as f64).sum::<f64>() / level0.len().max(1) as f64,

@@ -1,9 +1,37 @@
 //! `pipeline.toml`: the bake settings file. Unknown keys and bad values are errors that name
 //! the key and the file.
+//!
+//! # Which file applies
+//! Like cargo with `Cargo.toml`, [`discover`] walks up from the input (a mesh file's directory,
+//! or the input directory itself) to the nearest directory holding a `pipeline.toml`. The walk
+//! stops at the filesystem root and at the first directory holding `.git` (a repository root,
+//! whose own `pipeline.toml` still counts), so a file outside the repository never applies.
+//! `--config FILE` replaces the discovered file; with neither, the embedded defaults apply.
 
 use mres_build::settings::BakeSettings;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
+
+/// The file name [`discover`] looks for.
+pub const CONFIG_FILE_NAME: &str = "pipeline.toml";
+
+/// The nearest `pipeline.toml` that applies to `input` (see the module documentation), or
+/// `None` if there is none below the walk's stopping point.
+pub fn discover(input: &Path) -> std::io::Result<Option<PathBuf>> {
+    let start = if input.is_dir() { input } else { input.parent().unwrap_or(Path::new("")) };
+    let start = if start.as_os_str().is_empty() { Path::new(".") } else { start };
+    let start = start.canonicalize().map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", start.display())))?;
+    for dir in start.ancestors() {
+        let candidate = dir.join(CONFIG_FILE_NAME);
+        if candidate.is_file() {
+            return Ok(Some(candidate));
+        }
+        if dir.join(".git").exists() {
+            break;
+        }
+    }
+    Ok(None)
+}
 
 /// The embedded defaults: the repository's `pipeline.toml`.
 pub const DEFAULT_PIPELINE_TOML: &str = include_str!("../../../pipeline.toml");
@@ -60,6 +88,14 @@ pub struct Override {
     /// The `[bake]` keys it sets.
     pub settings: toml::Table,
     matcher: globset::GlobMatcher,
+}
+
+impl Override {
+    /// Whether this override applies to the asset at `relative` (path under the asset root).
+    pub fn matches(&self, relative: &Path) -> bool {
+        let rel: PathBuf = relative.components().collect();
+        self.matcher.is_match(rel)
+    }
 }
 
 #[derive(Deserialize)]
@@ -122,15 +158,19 @@ impl PipelineConfig {
 
     /// The effective settings of the asset at `relative` (path under the asset root).
     pub fn settings_for(&self, relative: &Path) -> BakeSettings {
-        let rel: PathBuf = relative.components().collect();
         let mut settings = self.bake.clone();
         for o in &self.overrides {
-            if o.matcher.is_match(&rel) {
+            if o.matches(relative) {
                 // Checked when the file was parsed.
                 settings = merge(&settings, &o.settings).unwrap_or(settings);
             }
         }
         settings
+    }
+
+    /// The overrides that match none of `relatives` (asset paths under the asset root).
+    pub fn unmatched_overrides<'a>(&'a self, relatives: &[PathBuf]) -> Vec<&'a Override> {
+        self.overrides.iter().filter(|o| !relatives.iter().any(|r| o.matches(r))).collect()
     }
 }
 
@@ -169,5 +209,29 @@ mod tests {
         assert_eq!(c.settings_for(Path::new("scans/a.obj")).position_bits, 18);
         assert_eq!(c.settings_for(Path::new("scans/x/hero.glb")).position_bits, 20);
         assert_eq!(c.settings_for(Path::new("scans/a.obj")).normal_bits, 8);
+        let assets = [PathBuf::from("scans/a.obj")];
+        let unmatched: Vec<_> = c.unmatched_overrides(&assets).iter().map(|o| o.glob.as_str()).collect();
+        assert_eq!(unmatched, ["**/hero.glb"]);
+    }
+
+    #[test]
+    fn discovery_walks_up_and_stops_at_a_repository_root() {
+        let dir = tempfile::tempdir().unwrap();
+        let tree = dir.path().join("outer/repo/assets/scans");
+        std::fs::create_dir_all(&tree).unwrap();
+        std::fs::write(dir.path().join("outer/pipeline.toml"), "").unwrap();
+        std::fs::write(tree.join("a.obj"), "").unwrap();
+        // Above the repository (.git) only: not found.
+        std::fs::create_dir(dir.path().join("outer/repo/.git")).unwrap();
+        assert_eq!(discover(&tree.join("a.obj")).unwrap(), None);
+        // The repository root's own file counts, from a file or a directory below it.
+        let root_config = dir.path().join("outer/repo/pipeline.toml");
+        std::fs::write(&root_config, "").unwrap();
+        let found = discover(&tree.join("a.obj")).unwrap().unwrap();
+        assert_eq!(found, root_config.canonicalize().unwrap());
+        // The nearest one wins.
+        let near = dir.path().join("outer/repo/assets/pipeline.toml");
+        std::fs::write(&near, "").unwrap();
+        assert_eq!(discover(&tree).unwrap().unwrap(), near.canonicalize().unwrap());
     }
 }

@@ -7,3 +7,5 @@ pub mod bench;
 pub mod config;
 pub mod export;
 pub mod generate;
+pub mod inspect;
+pub mod tree;

@@ -1,5 +1,6 @@
-//! `bake-all` as a pipeline service (issue #3): cache hits and misses on every key input,
-//! overrides, reports, concurrent bakers, a killed baker, corrupt cache entries.
+//! `bake-all` as a pipeline service: cache hits and misses on every key input, overrides,
+//! reports, concurrent bakers, a killed baker, corrupt cache entries; settings discovery,
+//! stale outputs, skipped files, output checks before any work.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -81,10 +82,13 @@ fn second_run_bakes_nothing_and_each_key_input_rebakes_exactly_its_assets() {
     let t = tree();
     let first = t.bake(&[]);
     assert_eq!(first["baked"], 4);
-    assert_eq!(first["skipped"], 1, "the .mtl is not a mesh");
+    assert_eq!(first["skipped"], 0, "the .mtl is used by painted.obj: not skipped");
+    assert_eq!(first["companion_files"], 1);
     let a = &first["assets"][0];
     for field in [
         "input_triangles",
+        "level0_triangles",
+        "degenerate_dropped",
         "levels",
         "clusters",
         "groups",
@@ -251,4 +255,194 @@ fn output_is_identical_for_any_jobs() {
     let two: Vec<Vec<u8>> = walk(&t.out).iter().map(|p| std::fs::read(p).unwrap()).collect();
     assert_eq!(one.len(), 4);
     assert_eq!(one, two);
+}
+
+/// `bake-all ARGS` in full: exit code and stdout + stderr.
+fn bake_all(args: &[&str]) -> (Option<i32>, String) {
+    let o = run(BAKE_ALL, args);
+    (o.status.code(), text(&o))
+}
+
+/// position_bits of a baked file, from `mres inspect --json`.
+fn position_bits(file: &Path) -> u64 {
+    let o = run(MRES, &["inspect", file.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    v["position_bits"].as_u64().unwrap()
+}
+
+#[test]
+fn settings_are_found_above_a_subfolder_or_a_file_and_outputs_mirror_the_tree() {
+    let t = tree();
+    let config = t.assets.join("pipeline.toml");
+    std::fs::write(&config, "[bake]\nposition_bits = 12\n[[override]]\nglob = \"scans/**\"\nposition_bits = 14\n")
+        .unwrap();
+    let canonical = config.canonicalize().unwrap();
+    let whole = t.bake(&["--no-cache"]);
+    assert_eq!(whole["config"], canonical.to_str().unwrap());
+    assert_eq!(position_bits(&t.out.join("ball.mres")), 12);
+    let ground = t.out.join("scans/ground.mres");
+    assert_eq!(position_bits(&ground), 14);
+
+    // A subfolder: same settings, same override, same output path below the output directory.
+    let sub_out = t.out.with_file_name("sub-out");
+    let scans = t.assets.join("scans");
+    let (code, msg) = bake_all(&[scans.to_str().unwrap(), "-o", sub_out.to_str().unwrap(), "--no-cache"]);
+    assert_eq!(code, Some(0), "{msg}");
+    assert!(msg.contains(&format!("config: {}", canonical.display())), "{msg}");
+    assert_eq!(std::fs::read(sub_out.join("scans/ground.mres")).unwrap(), std::fs::read(&ground).unwrap());
+    // One file.
+    let file_out = t.out.with_file_name("file-out");
+    let obj = scans.join("ground.obj");
+    let (code, msg) = bake_all(&[obj.to_str().unwrap(), "-o", file_out.to_str().unwrap(), "--no-cache"]);
+    assert_eq!(code, Some(0), "{msg}");
+    assert_eq!(std::fs::read(file_out.join("scans/ground.mres")).unwrap(), std::fs::read(&ground).unwrap());
+    // --config replaces it; a file outside the tree makes the input directory the root.
+    let elsewhere = t.out.with_file_name("cfg");
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    std::fs::write(elsewhere.join("other.toml"), "[bake]\nposition_bits = 13\n").unwrap();
+    let other_out = t.out.with_file_name("other-out");
+    let (code, msg) = bake_all(&[
+        obj.to_str().unwrap(),
+        "-o",
+        other_out.to_str().unwrap(),
+        "--no-cache",
+        "--config",
+        elsewhere.join("other.toml").to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{msg}");
+    assert!(msg.contains("other.toml"), "{msg}");
+    assert_eq!(position_bits(&other_out.join("ground.mres")), 13);
+}
+
+#[test]
+fn settings_above_the_repository_root_do_not_apply() {
+    let t = tree();
+    let outer = t.assets.parent().unwrap();
+    std::fs::write(outer.join("pipeline.toml"), "[bake]\nposition_bits = 12\n").unwrap();
+    std::fs::create_dir(t.assets.join(".git")).unwrap();
+    let report = t.bake(&["--no-cache"]);
+    assert!(report["config"].is_null(), "{}", report["config"]);
+    assert_eq!(position_bits(&t.out.join("ball.mres")), 16);
+    let (_, msg) = bake_all(&[t.assets.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache"]);
+    assert!(msg.contains("config: embedded defaults"), "{msg}");
+}
+
+#[test]
+fn stale_outputs_are_listed_and_pruned_and_nothing_else_is_touched() {
+    let t = tree();
+    // Marks the tree's root, so that a subfolder's batch knows where it lies in the tree.
+    std::fs::write(t.assets.join("pipeline.toml"), "").unwrap();
+    t.bake(&["--no-cache"]);
+    std::fs::rename(t.assets.join("ball.obj"), t.assets.join("ball2.obj")).unwrap();
+    std::fs::write(t.out.join("notes.txt"), "keep").unwrap();
+    let report = t.bake(&["--no-cache"]);
+    let stale = t.out.join("ball.mres");
+    assert_eq!(report["stale"], serde_json::json!([stale.to_str().unwrap()]));
+    assert!(stale.is_file(), "listed, not deleted, without --prune");
+    let (code, msg) = bake_all(&[t.assets.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache"]);
+    assert_eq!(code, Some(0));
+    assert!(
+        msg.contains("warning: 1 stale .mres files") && msg.contains("ball.mres") && msg.contains("--prune"),
+        "{msg}"
+    );
+    // A subfolder's batch only looks at its own part of the output directory.
+    let scans = t.assets.join("scans");
+    let (_, msg) = bake_all(&[scans.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache"]);
+    assert!(!msg.contains("stale"), "{msg}");
+
+    let report = t.bake(&["--no-cache", "--prune"]);
+    assert_eq!(report["pruned"], serde_json::json!([stale.to_str().unwrap()]));
+    assert!(!stale.exists());
+    assert!(t.out.join("ball2.mres").is_file() && t.out.join("notes.txt").is_file());
+    assert_eq!(walk(&t.out).len(), 4);
+}
+
+#[test]
+fn skipped_files_are_named_with_the_reason_and_companions_are_not_skipped() {
+    let t = tree();
+    std::fs::write(t.assets.join("scans/statue.fbx"), "binary").unwrap();
+    std::fs::write(t.assets.join("pipeline.toml"), "").unwrap();
+    let report = t.bake(&["--no-cache"]);
+    assert_eq!(report["skipped"], 1, "{report:#}");
+    assert_eq!(report["companion_files"], 2, "painted.mtl and pipeline.toml");
+    let skipped = &report["skipped_files"][0];
+    assert!(skipped["path"].as_str().unwrap().ends_with("scans/statue.fbx"), "{skipped}");
+    assert_eq!(skipped["reason"], "no importer for .fbx files");
+    let (_, msg) = bake_all(&[t.assets.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache"]);
+    assert!(msg.contains("1 files skipped (--verbose names them)") && !msg.contains("statue.fbx"), "{msg}");
+    let (_, msg) = bake_all(&[t.assets.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache", "--verbose"]);
+    assert!(msg.contains("statue.fbx: no importer for .fbx files"), "{msg}");
+}
+
+#[test]
+fn an_empty_input_fails_and_an_unmatched_glob_warns() {
+    let dir = tempfile::tempdir().unwrap();
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    std::fs::write(empty.join("notes.txt"), "").unwrap();
+    let out = dir.path().join("out");
+    let (code, msg) = bake_all(&[empty.to_str().unwrap(), "-o", out.to_str().unwrap(), "--no-cache"]);
+    assert_eq!(code, Some(1), "{msg}");
+    assert!(msg.contains("no assets found under") && msg.contains("empty"), "{msg}");
+
+    let t = tree();
+    std::fs::write(
+        t.assets.join("pipeline.toml"),
+        "[[override]]\nglob = \"scans/**\"\nnormal_bits = 8\n[[override]]\nglob = \"props/**\"\nnormal_bits = 8\n",
+    )
+    .unwrap();
+    let report = t.bake(&["--no-cache"]);
+    let unmatched = report["unmatched_overrides"].as_array().unwrap();
+    assert_eq!(unmatched.len(), 1, "{unmatched:?}");
+    assert!(unmatched[0].as_str().unwrap().contains("\"props/**\" matches no asset"), "{unmatched:?}");
+    let (code, msg) = bake_all(&[t.assets.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache"]);
+    assert_eq!(code, Some(0));
+    assert!(msg.contains("warning: ") && msg.contains("props/**"), "{msg}");
+}
+
+#[test]
+fn an_unusable_output_directory_or_report_fails_before_any_bake() {
+    let t = tree();
+    let blocker = t.out.with_file_name("blocker");
+    std::fs::write(&blocker, "a file, not a directory").unwrap();
+    let bad_out = blocker.join("out");
+    let (code, msg) = bake_all(&[
+        t.assets.to_str().unwrap(),
+        "-o",
+        bad_out.to_str().unwrap(),
+        "--cache-dir",
+        t.cache.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(2), "{msg}");
+    assert!(msg.contains(bad_out.to_str().unwrap()), "{msg}");
+    assert!(!t.cache.exists(), "nothing was baked into the cache");
+    let bad_report = blocker.join("r.json");
+    let (code, msg) = bake_all(&[
+        t.assets.to_str().unwrap(),
+        "-o",
+        t.out.to_str().unwrap(),
+        "--cache-dir",
+        t.cache.to_str().unwrap(),
+        "--report",
+        bad_report.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(2), "{msg}");
+    assert!(msg.contains("r.json"), "{msg}");
+    assert!(!t.cache.exists() && walk(&t.out).is_empty(), "nothing was baked");
+}
+
+#[test]
+fn the_log_has_no_colour_codes_when_stderr_is_not_a_terminal() {
+    let t = tree();
+    let o = Command::new(BAKE_ALL)
+        .args([t.assets.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache"])
+        .env("RUST_LOG", "info")
+        .env_remove("NO_COLOR")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("INFO"), "{log}");
+    assert!(!log.contains('\u{1b}'), "ANSI escape in a redirected log: {log:?}");
 }

@@ -1,16 +1,31 @@
-//! `mres`: validate, inspect, export and benchmark `.mres` files.
+//! `mres`: validate, inspect, export and benchmark `.mres` files; maintain the bake cache;
+//! generate test meshes. One function per subcommand.
 
 use anyhow::{bail, Context, Result};
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 use mres_build::BakeSettings;
 use mres_check::validate::{validate, ValidateOptions};
 use mres_cli::bench::{run_clusterlod, run_mres, BuilderRun, CUT_THRESHOLDS};
-use mres_format::{select, MresFile, NO_GROUP};
+use mres_cli::inspect::summarize;
+use mres_format::{select, MresFile};
+use mres_import::SourceMesh;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "mres", version, about = "Validate, inspect, export and benchmark .mres cluster-DAG files")]
+#[command(
+    name = "mres",
+    version,
+    about = "Validate, inspect, export and benchmark .mres cluster-DAG files; maintain the bake cache",
+    long_about = "Validate, inspect, export and benchmark .mres cluster-DAG files; maintain the bake cache; \
+        generate test meshes.\n\n\
+        Read-only commands print text, or JSON on stdout with --json. Commands that bake write a JSON \
+        report with --report FILE. Output files are checked to be writable before any work and written \
+        whole (through a temporary file) or not at all.\n\n\
+        Exit codes: 0 ok; 1 violations (validate) or corrupt entries (cache verify); 2 usage error, \
+        unreadable or damaged file, or I/O error."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -18,140 +33,261 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Check a file (DESIGN.md invariants 1–5): checksums and references, monotone errors and
-    /// nested spheres, crack-free cuts at every uniform threshold and at random cameras, DAG
-    /// conditioning (depth, edge age, group sizes, same-boundary clusters) and error honesty.
-    /// Thresholds are documented in `mres_check::validate::Thresholds`. Exit 1 on any violation.
-    Validate {
-        /// The .mres file.
-        file: PathBuf,
-        /// Random view-dependent cuts to check.
-        #[arg(long, default_value_t = 1000)]
-        random_cuts: usize,
-        /// Most uniform cuts to check: every distinct group error by default (0); with N,
-        /// N thresholds spread evenly over the sorted errors, the finest and coarsest included
-        /// (for files of tens of millions of triangles).
-        #[arg(long, default_value_t = 0)]
-        uniform_cuts: usize,
-        /// Seed of the random cameras.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Print the report as JSON.
-        #[arg(long)]
-        json: bool,
-    },
-    /// Print a file's header, levels, groups, pages and sizes.
-    Inspect {
-        /// The .mres file.
-        file: PathBuf,
-        /// Print as JSON.
-        #[arg(long)]
-        json: bool,
-    },
+    /// Check a file against docs/INVARIANTS.md §1-§5: checksums and references, monotone
+    /// errors and nested spheres, crack-free cuts at every uniform threshold and at random
+    /// cameras, DAG conditioning (depth, edge age, group sizes, same-boundary clusters) and
+    /// error honesty (thresholds: `mres_check::validate::Thresholds`). Exit 1 on any violation.
+    Validate(ValidateArgs),
+    /// Summarise a file to help choose a cut: size, input and level-0 triangles, attributes,
+    /// grid and bounds, then per level the groups, clusters, triangles and group errors (object
+    /// units and a fraction of the bounds diagonal), and the triangles of uniform cuts. Reads
+    /// and verifies every page: a damaged file exits 2.
+    Inspect(InspectArgs),
     /// Write a cut of the DAG as an OBJ mesh: the uniform cut at object-space error E, or the
     /// view-dependent cut seen from a camera at a pixel threshold.
-    Export {
-        /// The .mres file.
-        file: PathBuf,
-        /// Object-space error of the uniform cut (0 = original geometry).
-        #[arg(long, conflicts_with = "camera")]
-        error: Option<f32>,
-        /// Eye position "x,y,z" of a view-dependent cut (60° vertical field of view).
-        #[arg(long, value_parser = parse_vec3, requires = "tau")]
-        camera: Option<[f32; 3]>,
-        /// Pixel threshold of the view-dependent cut.
-        #[arg(long)]
-        tau: Option<f32>,
-        /// Viewport height in pixels for the view-dependent cut.
-        #[arg(long, default_value_t = 1080.0)]
-        height: f32,
-        /// Output OBJ path.
-        #[arg(short, long)]
-        output: PathBuf,
-    },
-    /// Bake INPUT with mres and with meshoptimizer's clusterlod in the same run (each in its own
-    /// child process) and compare time, peak memory and quality.
-    Bench {
-        /// Mesh file (OBJ, glTF, GLB).
-        input: PathBuf,
-        /// Runs per builder; the minimum time and RSS are reported.
-        #[arg(long, default_value_t = 1)]
-        repeat: usize,
-        /// Bake settings from this pipeline.toml's [bake] table (default: the compiled-in ones),
-        /// e.g. to compare `error_bound` modes.
-        #[arg(long)]
-        config: Option<PathBuf>,
-        /// Print as JSON.
-        #[arg(long)]
-        json: bool,
-    },
-    /// Maintain the bake cache: stats, verify (check every entry; --repair removes corrupt
-    /// ones), gc --max-size SIZE (drop least recently used entries until the cache fits).
-    Cache {
-        #[command(subcommand)]
-        action: CacheAction,
-        /// Cache directory.
-        #[arg(long, default_value = ".mres-cache", global = true)]
-        cache_dir: PathBuf,
-    },
-    /// One builder run of `bench` (internal).
+    Export(ExportArgs),
+    /// Bake INPUT with mres and with meshoptimizer's clusterlod (each in its own child process)
+    /// and compare time, peak memory and quality.
+    Bench(BenchArgs),
+    /// Maintain the bake cache of `bake-all`.
+    Cache(CacheArgs),
+    /// One builder run of `bench` (internal): prints a JSON BuilderRun.
     #[command(hide = true)]
-    BenchChild {
-        /// "mres" or "clusterlod".
-        builder: String,
-        /// Mesh file.
-        input: PathBuf,
-        /// pipeline.toml whose [bake] settings to use.
-        #[arg(long)]
-        config: Option<PathBuf>,
-    },
-    /// Write a generated test mesh as OBJ: sphere N (12·N² triangles, closed), terrain N
-    /// (2·N² triangles, open), boxes N (N disconnected boxes of 192 triangles), seamed-sphere N
-    /// (a sphere whose 6 faces are separate UV charts and materials), cards N (N disconnected
-    /// open quads, like foliage), defects N (sphere N with holes, duplicate triangles and
-    /// non-manifold fins).
-    Generate {
-        /// sphere, terrain, boxes, seamed-sphere, cards or defects.
-        kind: String,
-        /// Size parameter.
-        n: u32,
-        /// Output OBJ path.
-        #[arg(short, long)]
-        output: PathBuf,
-    },
+    BenchChild(BenchChildArgs),
+    /// Write a generated test mesh as OBJ.
+    Generate(GenerateArgs),
+}
+
+#[derive(Args)]
+struct ValidateArgs {
+    /// The .mres file.
+    file: PathBuf,
+    /// Random view-dependent cuts to check.
+    #[arg(long, default_value_t = 1000, value_name = "N")]
+    random_cuts: usize,
+    /// Most uniform cuts to check: every distinct group error by default (0); with N, N
+    /// thresholds spread evenly over the sorted errors, the finest and coarsest included (for
+    /// files of tens of millions of triangles).
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    uniform_cuts: usize,
+    /// Seed of the random cameras.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Print the report as JSON on stdout instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct InspectArgs {
+    /// The .mres file.
+    file: PathBuf,
+    /// Print the same summary as JSON on stdout instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct ExportArgs {
+    /// The .mres file.
+    file: PathBuf,
+    /// Object-space error of the uniform cut (a finite number >= 0; 0 = the original
+    /// geometry). `mres inspect` lists the triangles of uniform cuts per error.
+    #[arg(long, value_name = "E", conflicts_with = "camera", allow_negative_numbers = true, value_parser = parse_error)]
+    error: Option<f32>,
+    /// Eye position "x,y,z" of a view-dependent cut (60° vertical field of view, looking at
+    /// the whole file).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, requires = "tau", allow_hyphen_values = true)]
+    camera: Option<[f32; 3]>,
+    /// Pixel threshold of the view-dependent cut (a finite number > 0).
+    #[arg(long, value_name = "PIXELS", allow_negative_numbers = true, value_parser = parse_positive)]
+    tau: Option<f32>,
+    /// Viewport height in pixels of the view-dependent cut (a finite number > 0).
+    #[arg(long, default_value_t = 1080.0, allow_negative_numbers = true, value_parser = parse_positive)]
+    height: f32,
+    /// Output OBJ file.
+    #[arg(short, long, value_name = "FILE")]
+    output: PathBuf,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Mesh file (OBJ, glTF, GLB).
+    input: PathBuf,
+    /// Runs per builder; the minimum time and RSS are reported.
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    repeat: usize,
+    /// Bake settings from this pipeline.toml's [bake] table (default: the compiled-in ones),
+    /// e.g. to compare `error_bound` modes.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Also write both builders' figures as JSON to FILE.
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct CacheArgs {
+    #[command(subcommand)]
+    action: CacheAction,
+    /// Cache directory.
+    #[arg(long, default_value = ".mres-cache", global = true, value_name = "DIR")]
+    cache_dir: PathBuf,
+    /// Print the result as JSON on stdout instead of text.
+    #[arg(long, global = true)]
+    json: bool,
 }
 
 #[derive(Subcommand)]
 enum CacheAction {
-    /// Entries, bytes, temporary files, oldest and newest entry.
+    /// Entries, bytes and temporary files.
     Stats,
-    /// Read every entry and check its header and content hash; exit 1 if any is corrupt.
+    /// Read every entry and check its header and content hash; exit 1 if any is corrupt
+    /// (unless --repair removed them).
     Verify {
         /// Remove corrupt entries.
         #[arg(long)]
         repair: bool,
     },
     /// Remove stale temporary files, then least recently used entries until the cache holds at
-    /// most SIZE (e.g. 500M, 2G; K/M/G/T are powers of 1024).
+    /// most SIZE.
     Gc {
-        /// Largest total size to keep.
-        #[arg(long, value_parser = cache::parse_size)]
+        /// Largest total size to keep, e.g. 500M or 2G (K, M, G, T are powers of 1024).
+        #[arg(long, value_parser = cache::parse_size, value_name = "SIZE")]
         max_size: u64,
     },
 }
 
+/// The builders `bench` compares.
+#[derive(Clone, Copy, ValueEnum)]
+enum Builder {
+    /// This repository's baker.
+    Mres,
+    /// meshoptimizer's clusterlod.
+    Clusterlod,
+}
+
+#[derive(Args)]
+struct BenchChildArgs {
+    /// The builder to run.
+    #[arg(value_enum)]
+    builder: Builder,
+    /// Mesh file.
+    input: PathBuf,
+    /// pipeline.toml whose [bake] settings to use.
+    #[arg(long)]
+    config: Option<PathBuf>,
+}
+
+/// The generated test meshes.
+#[derive(Clone, Copy, ValueEnum)]
+enum MeshKind {
+    /// A closed cube-sphere, 12·N² triangles, with normals.
+    Sphere,
+    /// An open height field, 2·N² triangles, with UVs.
+    Terrain,
+    /// N disconnected closed boxes of 192 triangles.
+    Boxes,
+    /// A sphere whose 6 faces are separate UV charts and materials (attribute seams).
+    SeamedSphere,
+    /// N disconnected open quads, like foliage cards.
+    Cards,
+    /// Sphere N with holes, duplicate triangles and non-manifold fins.
+    Defects,
+}
+
+#[derive(Args)]
+struct GenerateArgs {
+    /// Which mesh.
+    #[arg(value_enum)]
+    kind: MeshKind,
+    /// Size parameter (see each kind).
+    n: u32,
+    /// Output OBJ file.
+    #[arg(short, long, value_name = "FILE")]
+    output: PathBuf,
+}
+
+fn parse_number(s: &str) -> Result<f32, String> {
+    let x: f32 = s.trim().parse().map_err(|e| format!("{s:?} is not a number: {e}"))?;
+    if !x.is_finite() {
+        return Err(format!("{s} is not a finite number"));
+    }
+    Ok(x)
+}
+
+fn parse_error(s: &str) -> Result<f32, String> {
+    let e = parse_number(s)?;
+    if e < 0.0 {
+        return Err(format!("{s} is negative: an error is a distance in object units, >= 0"));
+    }
+    Ok(e)
+}
+
+fn parse_positive(s: &str) -> Result<f32, String> {
+    let x = parse_number(s)?;
+    if x <= 0.0 {
+        return Err(format!("{s} must be > 0"));
+    }
+    Ok(x)
+}
+
 fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
-    let v: Vec<f32> =
-        s.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
-    v.try_into().map_err(|_| "expected x,y,z".to_string())
+    let v: Vec<f32> = s.split(',').map(parse_number).collect::<Result<_, _>>()?;
+    v.try_into().map_err(|_| format!("{s:?}: expected three numbers x,y,z"))
 }
 
 fn open(path: &Path) -> Result<MresFile> {
     MresFile::open(path).with_context(|| format!("{}", path.display()))
 }
 
+/// A file written whole or not at all: a temporary file beside `path`, created before any work
+/// so that an unwritable destination fails first, renamed onto `path` by [`Output::finish`].
+struct Output<'a> {
+    path: &'a Path,
+    tmp: tempfile::NamedTempFile,
+}
+
+impl<'a> Output<'a> {
+    fn create(path: &'a Path) -> Result<Output<'a>> {
+        if path.is_dir() {
+            bail!("{}: is a directory", path.display());
+        }
+        let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let tmp = tempfile::Builder::new()
+            .prefix(".mres-output")
+            .tempfile_in(dir)
+            .with_context(|| format!("{}: cannot write in {}", path.display(), dir.display()))?;
+        Ok(Output { path, tmp })
+    }
+
+    fn finish(self) -> Result<()> {
+        let path = self.path;
+        self.tmp.persist(path).with_context(|| format!("{}", path.display()))?;
+        Ok(())
+    }
+}
+
+fn write_obj(mesh: &SourceMesh, out: Output) -> Result<()> {
+    let mut writer = std::io::BufWriter::new(out.tmp.as_file());
+    mres_import::obj_write::write_obj(mesh, &mut writer).with_context(|| format!("{}", out.path.display()))?;
+    writer.flush().with_context(|| format!("{}", out.path.display()))?;
+    drop(writer);
+    out.finish()
+}
+
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Validate(a) => validate_cmd(a),
+        Command::Inspect(a) => inspect_cmd(a),
+        Command::Export(a) => export_cmd(a),
+        Command::Bench(a) => bench_cmd(a),
+        Command::Cache(a) => cache_cmd(a),
+        Command::BenchChild(a) => bench_child_cmd(a),
+        Command::Generate(a) => generate_cmd(a),
+    };
+    match result {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -160,245 +296,281 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> Result<ExitCode> {
-    match cli.command {
-        Command::Validate { file, random_cuts, uniform_cuts, seed, json } => {
-            let f = open(&file)?;
-            let report = validate(&f, &ValidateOptions { random_cuts, uniform_cuts, seed, ..Default::default() })
-                .with_context(|| format!("{}", file.display()))?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                println!(
-                    "{}: {} bytes, {} source triangles, {:.2} bytes/input triangle, {} pages",
-                    file.display(),
-                    report.bytes,
-                    report.source_triangles,
-                    report.bytes_per_input_triangle,
-                    report.pages
-                );
-                println!(
-                    "levels {}  root groups {}  root clusters {}  level-0 fill {:.1}",
-                    report.levels, report.root_groups, report.root_clusters, report.level0_fill
-                );
-                println!("{:>5} {:>9} {:>8} {:>11}", "level", "clusters", "groups", "triangles");
-                for l in &report.per_level {
-                    println!("{:>5} {:>9} {:>8} {:>11}", l.level, l.clusters, l.groups, l.triangles);
-                }
-                println!(
-                    "cuts checked: {} uniform, {} random; cracked {}; relations checked {}; most pinched edges in a cut {}",
-                    report.uniform_cuts,
-                    report.random_cuts,
-                    report.cracked_cuts,
-                    report.relations_checked,
-                    report.max_pinched_edges
-                );
-                let c = &report.conditioning;
-                println!(
-                    "depth {} vs log2(level-0 clusters) {:.1} (ratio {:.2}); reduction per level {}",
-                    report.levels,
-                    c.log2_level0_clusters,
-                    c.depth_ratio,
-                    c.reduction_per_level.iter().map(|r| format!("{r:.2}")).collect::<Vec<_>>().join(" ")
-                );
-                println!(
-                    "edge age mean {:.2} max {} ({} locked original edges); same-boundary clusters {}; group sizes {:?}",
-                    c.edge_age_mean, c.edge_age_max, c.locked_original_edges, c.same_boundary_clusters, c.group_size_histogram
-                );
-                println!("edges by age (levels survived): {:?}", c.edge_age_histogram);
-                println!(
-                    "error honesty: worst {:.2} p99 {:.2} (measured distance / stored error, {} cuts, {} points); worst at {}",
-                    report.honesty.worst_ratio, report.honesty.p99_ratio, report.honesty.cuts, report.honesty.samples, report.honesty.worst
-                );
-                for v in &report.violations {
-                    println!("VIOLATION {}: {v}", file.display());
-                }
-                println!("{}", if report.ok() { "OK" } else { "FAILED" });
-            }
-            Ok(if report.ok() { ExitCode::SUCCESS } else { ExitCode::from(1) })
+fn validate_cmd(a: ValidateArgs) -> Result<ExitCode> {
+    let f = open(&a.file)?;
+    let options = ValidateOptions {
+        random_cuts: a.random_cuts,
+        uniform_cuts: a.uniform_cuts,
+        seed: a.seed,
+        ..Default::default()
+    };
+    let report = validate(&f, &options).with_context(|| format!("{}", a.file.display()))?;
+    let level0 = mres_cli::batch::level0_triangles(&f);
+    if a.json {
+        let mut value = serde_json::to_value(&report)?;
+        if let Some(object) = value.as_object_mut() {
+            object.insert("input_triangles".into(), report.source_triangles.into());
+            object.insert("level0_triangles".into(), level0.into());
         }
-        Command::Inspect { file, json } => {
-            let f = open(&file)?;
-            inspect(&f, json)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Export { file, error, camera, tau, height, output } => {
-            let f = open(&file)?;
-            let cut = match (error, camera, tau) {
-                (Some(e), None, _) => select::uniform_cut(&f.groups, &f.clusters, e),
-                (None, Some(eye), Some(tau)) => {
-                    let radius = f.groups.first().map_or(1.0, |g| g.sphere.radius);
-                    let view = select::ViewParams {
-                        eye,
-                        proj_y: 1.0 / 30f32.to_radians().tan(),
-                        viewport_height: height,
-                        z_near: radius * 1e-3,
-                    };
-                    select::view_cut(&f.groups, &f.clusters, &view, tau)
-                }
-                _ => bail!("give --error E, or --camera x,y,z with --tau T"),
-            };
-            let mesh = mres_cli::export::cut_mesh(&f, &cut)?;
-            let mut out = std::io::BufWriter::new(
-                std::fs::File::create(&output).with_context(|| format!("{}", output.display()))?,
-            );
-            mres_import::obj_write::write_obj(&mesh, &mut out).with_context(|| format!("{}", output.display()))?;
-            eprintln!("{}: {} clusters, {} triangles", output.display(), cut.len(), mesh.triangle_count());
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Bench { input, repeat, config, json } => bench(&input, repeat.max(1), config.as_deref(), json),
-        Command::Cache { action, cache_dir } => {
-            let disk = cache::LocalDisk::open(&cache_dir).with_context(|| format!("cache {}", cache_dir.display()))?;
-            match action {
-                CacheAction::Stats => {
-                    let s = disk.stats()?;
-                    println!(
-                        "{}: {} entries, {} bytes, {} temporary files",
-                        cache_dir.display(),
-                        s.entries,
-                        s.bytes,
-                        s.temp_files
-                    );
-                }
-                CacheAction::Verify { repair } => {
-                    let r = disk.verify(repair)?;
-                    println!(
-                        "{}: {} entries checked, {} valid ({} bytes), {} corrupt",
-                        cache_dir.display(),
-                        r.checked,
-                        r.valid,
-                        r.valid_bytes,
-                        r.corrupt.len()
-                    );
-                    for c in &r.corrupt {
-                        println!(
-                            "corrupt: {}: {}{}",
-                            c.path.display(),
-                            c.problem,
-                            if c.removed { " (removed)" } else { "" }
-                        );
-                    }
-                    if !r.is_clean() && !repair {
-                        return Ok(ExitCode::from(1));
-                    }
-                }
-                CacheAction::Gc { max_size } => {
-                    let r = disk.gc(max_size)?;
-                    println!(
-                        "{}: removed {} entries ({} bytes) and {} temporary files; kept {} entries ({} bytes)",
-                        cache_dir.display(),
-                        r.entries_removed,
-                        r.bytes_removed,
-                        r.temp_removed,
-                        r.entries_kept,
-                        r.bytes_kept
-                    );
-                }
-            }
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::BenchChild { builder, input, config } => {
-            let settings = match config {
-                Some(path) => mres_cli::config::PipelineConfig::load(&path).map_err(anyhow::Error::msg)?.bake,
-                None => BakeSettings::default(),
-            };
-            let mesh = mres_import::import_file(&input, &Default::default())?;
-            let run = match builder.as_str() {
-                "mres" => run_mres(mesh, &settings)?,
-                "clusterlod" => run_clusterlod(mesh, &settings)?,
-                other => bail!("unknown builder {other}"),
-            };
-            println!("{}", serde_json::to_string(&run)?);
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Generate { kind, n, output } => {
-            let mesh = match kind.as_str() {
-                "sphere" => mres_cli::generate::sphere(n),
-                "terrain" => mres_cli::generate::terrain(n),
-                "boxes" => mres_cli::generate::boxes(n, 4),
-                "seamed-sphere" => mres_cli::generate::seamed_sphere(n),
-                "cards" => mres_cli::generate::cards(n),
-                "defects" => mres_cli::generate::defects(n),
-                other => bail!("unknown kind {other} (sphere, terrain, boxes, seamed-sphere, cards, defects)"),
-            };
-            let mut out = std::io::BufWriter::new(
-                std::fs::File::create(&output).with_context(|| format!("{}", output.display()))?,
-            );
-            mres_import::obj_write::write_obj(&mesh, &mut out)?;
-            eprintln!("{}: {} triangles", output.display(), mesh.triangle_count());
-            Ok(ExitCode::SUCCESS)
-        }
-    }
-}
-
-/// Fractions of the largest extent at which `inspect` counts the triangles of uniform cuts:
-/// 0, then half-decades from 1e-5 to 1e-1.
-const INSPECT_CUTS: [f32; 10] = [0.0, 1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1];
-
-fn inspect(f: &MresFile, json: bool) -> Result<()> {
-    let h = &f.header;
-    let level0 = f.clusters.iter().filter(|c| c.own_group == NO_GROUP).count();
-    let raw: u64 = f.pages.iter().map(|p| p.raw_size as u64).sum();
-    let value = serde_json::json!({
-        "flags": h.flags, "grid_origin": h.grid.origin, "grid_step": h.grid.step,
-        "position_bits": h.position_bits, "normal_bits": h.normal_bits, "levels": h.level_count,
-        "source_triangles": h.source_triangles, "groups": f.groups.len(), "clusters": f.clusters.len(),
-        "level0_clusters": level0, "pages": f.pages.len(), "file_bytes": f.file_size(), "raw_page_bytes": raw,
-        "stored_triangles": f.clusters.iter().map(|c| c.triangle_count as u64).sum::<u64>(),
-        "root_groups": f.groups.iter().filter(|g| g.error.is_infinite()).count(),
-        // Triangles drawn by uniform cuts at fixed fractions of the largest extent: comparable
-        // between two bakes of one mesh (e.g. sharded and whole).
-        "cut_triangles_at_extent_fraction": INSPECT_CUTS.iter().map(|&t| {
-            let extent = h.grid.step * ((1u64 << h.position_bits) - 1) as f32;
-            let cut = select::uniform_cut(&f.groups, &f.clusters, t * extent);
-            (t, cut.iter().map(|&c| f.clusters[c as usize].triangle_count as u64).sum::<u64>())
-        }).collect::<Vec<_>>(),
-    });
-    if json {
         println!("{}", serde_json::to_string_pretty(&value)?);
     } else {
-        for (k, v) in value.as_object().into_iter().flatten() {
-            println!("{k:>18}: {v}");
-        }
+        print_validate(&a.file, &report, level0);
     }
-    Ok(())
+    Ok(if report.ok() { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
-fn bench(input: &Path, repeat: usize, config: Option<&Path>, json: bool) -> Result<ExitCode> {
-    let exe = std::env::current_exe()?;
-    let mut best: Vec<BuilderRun> = Vec::new();
-    for builder in ["mres", "clusterlod"] {
-        let mut runs = Vec::new();
-        for _ in 0..repeat {
-            let mut child = std::process::Command::new(&exe);
-            child.args(["bench-child", builder]).arg(input);
-            if let Some(path) = config {
-                child.arg("--config").arg(path);
-            }
-            let out = child.output()?;
-            if !out.status.success() {
-                bail!("{builder} on {}: {}", input.display(), String::from_utf8_lossy(&out.stderr));
-            }
-            runs.push(serde_json::from_slice::<BuilderRun>(&out.stdout)?);
-        }
-        let mut run = runs[0].clone();
-        run.seconds = runs.iter().map(|r| r.seconds).fold(f64::INFINITY, f64::min);
-        run.dag_seconds = runs.iter().map(|r| r.dag_seconds).fold(f64::INFINITY, f64::min);
-        run.peak_rss_bytes = runs.iter().map(|r| r.peak_rss_bytes).min().unwrap_or(0);
-        best.push(run);
-    }
-    if json {
-        println!("{}", serde_json::to_string_pretty(&best)?);
-        return Ok(ExitCode::SUCCESS);
-    }
-    println!("{} ({} triangles), min over {repeat} run(s)", input.display(), best[0].input_triangles);
+fn print_validate(file: &Path, report: &mres_check::validate::Report, level0: u64) {
     println!(
-        "{:<11} {:>8} {:>8} {:>10} {:>8} {:>6} {:>6} {:>6}  triangles per uniform cut at {:?} × diagonal",
-        "builder", "total s", "DAG s", "peak MiB", "RSS B/tri", "levels", "roots", "fill", CUT_THRESHOLDS
+        "{}: {} bytes, {} input triangles ({} at level 0, {} degenerate dropped), {:.2} bytes/input triangle, {} pages",
+        file.display(),
+        report.bytes,
+        report.source_triangles,
+        level0,
+        report.source_triangles.saturating_sub(level0),
+        report.bytes_per_input_triangle,
+        report.pages
     );
-    for r in &best {
+    println!(
+        "levels {}  root groups {}  root clusters {}  level-0 fill {:.1}",
+        report.levels, report.root_groups, report.root_clusters, report.level0_fill
+    );
+    println!("{:>5} {:>9} {:>8} {:>11}", "level", "clusters", "groups", "triangles");
+    for l in &report.per_level {
+        println!("{:>5} {:>9} {:>8} {:>11}", l.level, l.clusters, l.groups, l.triangles);
+    }
+    println!(
+        "cuts checked: {} uniform, {} random; cracked {}; relations checked {}; most pinched edges in a cut {}",
+        report.uniform_cuts,
+        report.random_cuts,
+        report.cracked_cuts,
+        report.relations_checked,
+        report.max_pinched_edges
+    );
+    let c = &report.conditioning;
+    println!(
+        "depth {} vs log2(level-0 clusters) {:.1} (ratio {:.2}); reduction per level {}",
+        report.levels,
+        c.log2_level0_clusters,
+        c.depth_ratio,
+        c.reduction_per_level.iter().map(|r| format!("{r:.2}")).collect::<Vec<_>>().join(" ")
+    );
+    println!(
+        "edge age mean {:.2} max {} ({} locked original edges); same-boundary clusters {}; group sizes {:?}",
+        c.edge_age_mean, c.edge_age_max, c.locked_original_edges, c.same_boundary_clusters, c.group_size_histogram
+    );
+    println!("edges by age (levels survived): {:?}", c.edge_age_histogram);
+    let h = &report.honesty;
+    println!(
+        "error honesty: worst {:.2} p99 {:.2} (measured distance / stored error, {} cuts, {} points); worst at {}",
+        h.worst_ratio, h.p99_ratio, h.cuts, h.samples, h.worst
+    );
+    for v in &report.violations {
+        println!("VIOLATION {}: {v}", file.display());
+    }
+    println!("{}", if report.ok() { "OK" } else { "FAILED" });
+}
+
+fn inspect_cmd(a: InspectArgs) -> Result<ExitCode> {
+    let f = open(&a.file)?;
+    let summary = summarize(&f).with_context(|| format!("{}", a.file.display()))?;
+    if a.json {
+        let mut value = serde_json::to_value(&summary)?;
+        if let Some(object) = value.as_object_mut() {
+            object.insert("file".into(), a.file.display().to_string().into());
+        }
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    } else {
+        println!("{}", a.file.display());
+        print!("{}", summary.render());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn export_cmd(a: ExportArgs) -> Result<ExitCode> {
+    let out = Output::create(&a.output)?;
+    let f = open(&a.file)?;
+    let cut = match (a.error, a.camera, a.tau) {
+        (Some(e), None, _) => select::uniform_cut(&f.groups, &f.clusters, e),
+        (None, Some(eye), Some(tau)) => {
+            let radius = f.groups.first().map_or(1.0, |g| g.sphere.radius);
+            let view = select::ViewParams {
+                eye,
+                proj_y: 1.0 / 30f32.to_radians().tan(),
+                viewport_height: a.height,
+                z_near: radius * 1e-3,
+            };
+            select::view_cut(&f.groups, &f.clusters, &view, tau)
+        }
+        _ => bail!("give --error E, or --camera x,y,z with --tau T"),
+    };
+    let mesh = mres_cli::export::cut_mesh(&f, &cut).with_context(|| format!("{}", a.file.display()))?;
+    write_obj(&mesh, out)?;
+    eprintln!("{}: {} clusters, {} triangles", a.output.display(), cut.len(), mesh.triangle_count());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn generate_cmd(a: GenerateArgs) -> Result<ExitCode> {
+    use mres_cli::generate;
+    let out = Output::create(&a.output)?;
+    let mesh = match a.kind {
+        MeshKind::Sphere => generate::sphere(a.n),
+        MeshKind::Terrain => generate::terrain(a.n),
+        MeshKind::Boxes => generate::boxes(a.n, 4),
+        MeshKind::SeamedSphere => generate::seamed_sphere(a.n),
+        MeshKind::Cards => generate::cards(a.n),
+        MeshKind::Defects => generate::defects(a.n),
+    };
+    let triangles = mesh.triangle_count();
+    write_obj(&mesh, out)?;
+    eprintln!("{}: {triangles} triangles", a.output.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn cache_cmd(a: CacheArgs) -> Result<ExitCode> {
+    let dir = &a.cache_dir;
+    let disk = cache::LocalDisk::open(dir).with_context(|| format!("cache {}", dir.display()))?;
+    let (value, text, code) = match a.action {
+        CacheAction::Stats => {
+            let s = disk.stats()?;
+            let value = serde_json::json!({ "entries": s.entries, "bytes": s.bytes, "temp_files": s.temp_files });
+            let text = format!(
+                "{}: {} entries, {} bytes, {} temporary files",
+                dir.display(),
+                s.entries,
+                s.bytes,
+                s.temp_files
+            );
+            (value, text, ExitCode::SUCCESS)
+        }
+        CacheAction::Verify { repair } => {
+            let r = disk.verify(repair)?;
+            let corrupt: Vec<_> = r
+                .corrupt
+                .iter()
+                .map(|c| serde_json::json!({ "path": c.path, "problem": c.problem.to_string(), "removed": c.removed }))
+                .collect();
+            let value = serde_json::json!({
+                "checked": r.checked, "valid": r.valid, "valid_bytes": r.valid_bytes, "corrupt": corrupt,
+            });
+            let mut text = format!(
+                "{}: {} entries checked, {} valid ({} bytes), {} corrupt",
+                dir.display(),
+                r.checked,
+                r.valid,
+                r.valid_bytes,
+                r.corrupt.len()
+            );
+            for c in &r.corrupt {
+                let removed = if c.removed { " (removed)" } else { "" };
+                text.push_str(&format!("\ncorrupt: {}: {}{removed}", c.path.display(), c.problem));
+            }
+            let code = if !r.is_clean() && !repair { ExitCode::from(1) } else { ExitCode::SUCCESS };
+            (value, text, code)
+        }
+        CacheAction::Gc { max_size } => {
+            let r = disk.gc(max_size)?;
+            let value = serde_json::json!({
+                "entries_removed": r.entries_removed, "bytes_removed": r.bytes_removed,
+                "temp_removed": r.temp_removed, "temp_bytes_removed": r.temp_bytes_removed,
+                "entries_kept": r.entries_kept, "bytes_kept": r.bytes_kept,
+            });
+            let text = format!(
+                "{}: removed {} entries ({} bytes) and {} temporary files; kept {} entries ({} bytes)",
+                dir.display(),
+                r.entries_removed,
+                r.bytes_removed,
+                r.temp_removed,
+                r.entries_kept,
+                r.bytes_kept
+            );
+            (value, text, ExitCode::SUCCESS)
+        }
+    };
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    } else {
+        println!("{text}");
+    }
+    Ok(code)
+}
+
+fn bench_child_cmd(a: BenchChildArgs) -> Result<ExitCode> {
+    let settings = match &a.config {
+        Some(path) => mres_cli::config::PipelineConfig::load(path).map_err(anyhow::Error::msg)?.bake,
+        None => BakeSettings::default(),
+    };
+    let mesh = mres_import::import_file(&a.input, &Default::default())?;
+    let run = match a.builder {
+        Builder::Mres => run_mres(mesh, &settings)?,
+        Builder::Clusterlod => run_clusterlod(mesh, &settings)?,
+    };
+    println!("{}", serde_json::to_string(&run)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Runs `builder` `repeat` times in child processes and keeps the minimum time and RSS.
+fn bench_builder(builder: Builder, a: &BenchArgs) -> Result<BuilderRun> {
+    let exe = std::env::current_exe()?;
+    let name = builder.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
+    let mut runs = Vec::new();
+    for _ in 0..a.repeat.max(1) {
+        let mut child = std::process::Command::new(&exe);
+        child.args(["bench-child", &name]).arg(&a.input);
+        if let Some(path) = &a.config {
+            child.arg("--config").arg(path);
+        }
+        let out = child.output()?;
+        if !out.status.success() {
+            bail!("{name} on {}: {}", a.input.display(), String::from_utf8_lossy(&out.stderr).trim());
+        }
+        runs.push(serde_json::from_slice::<BuilderRun>(&out.stdout)?);
+    }
+    let min = |f: fn(&BuilderRun) -> f64| runs.iter().map(f).fold(f64::INFINITY, f64::min);
+    let (seconds, dag_seconds) = (min(|r| r.seconds), min(|r| r.dag_seconds));
+    let peak_rss_bytes = runs.iter().map(|r| r.peak_rss_bytes).min().unwrap_or(0);
+    let first = runs.swap_remove(0);
+    Ok(BuilderRun { seconds, dag_seconds, peak_rss_bytes, ..first })
+}
+
+fn bench_cmd(a: BenchArgs) -> Result<ExitCode> {
+    let report = match &a.report {
+        Some(path) => Some(Output::create(path)?),
+        None => None,
+    };
+    let best = [bench_builder(Builder::Mres, &a)?, bench_builder(Builder::Clusterlod, &a)?];
+    print_bench(&a, &best);
+    if let Some(out) = report {
+        serde_json::to_writer_pretty(out.tmp.as_file(), &best).with_context(|| format!("{}", out.path.display()))?;
+        out.finish()?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn print_bench(a: &BenchArgs, best: &[BuilderRun; 2]) {
+    let r0 = &best[0];
+    println!(
+        "{} ({} input triangles, {} degenerate dropped by the importer), min over {} run(s)",
+        a.input.display(),
+        r0.input_triangles,
+        best[1].degenerate_dropped,
+        a.repeat.max(1)
+    );
+    println!(
+        "{:<11} {:>8} {:>8} {:>10} {:>8} {:>6} {:>6} {:>6} {:>10}  triangles per uniform cut at {:?} × diagonal",
+        "builder",
+        "total s",
+        "DAG s",
+        "peak MiB",
+        "RSS B/tri",
+        "levels",
+        "roots",
+        "fill",
+        "level-0 tri",
+        CUT_THRESHOLDS
+    );
+    for r in best {
         println!(
-            "{:<11} {:>8.3} {:>8.3} {:>10.1} {:>8.1} {:>6} {:>6} {:>6.1}  {:?}{}",
+            "{:<11} {:>8.3} {:>8.3} {:>10.1} {:>8.1} {:>6} {:>6} {:>6.1} {:>10}  {:?}{}",
             r.builder,
             r.seconds,
             r.dag_seconds,
@@ -407,6 +579,7 @@ fn bench(input: &Path, repeat: usize, config: Option<&Path>, json: bool) -> Resu
             r.levels,
             r.root_clusters,
             r.level0_fill,
+            r.level0_triangles,
             r.cut_triangles,
             if r.bytes > 0 {
                 format!("  file {:.2} B/input tri", r.bytes as f64 / r.input_triangles.max(1) as f64)
@@ -421,5 +594,4 @@ fn bench(input: &Path, repeat: usize, config: Option<&Path>, json: bool) -> Resu
         best[0].dag_seconds / best[1].dag_seconds,
         best[0].peak_rss_bytes as f64 / best[1].peak_rss_bytes.max(1) as f64
     );
-    Ok(ExitCode::SUCCESS)
 }
