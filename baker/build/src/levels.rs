@@ -97,11 +97,31 @@ impl<'a> Builder<'a> {
         if self.pending.len() <= 1 || self.level >= MAX_LEVELS {
             return false;
         }
-        let (mesh, settings, clusters) = (self.mesh, self.settings, &mut self.clusters);
+        let clusters = &self.clusters;
         let refs: Vec<&[u32]> = self.pending.iter().map(|&c| clusters[c].indices.as_slice()).collect();
         let centers: Vec<[f32; 3]> = self.pending.iter().map(|&c| clusters[c].own_sphere.center).collect();
-        let graph = cluster_graph(&refs, &mesh.position_ids, &centers);
-        let parts = partition(&graph, settings.group_size as usize);
+        let graph = cluster_graph(&refs, &self.mesh.position_ids, &centers);
+        let parts = partition(&graph, self.settings.group_size as usize);
+        let results = self.simplify_parts(&parts, &refs);
+        drop(refs);
+        let progressed = self.adopt(&parts, results);
+        self.level += 1;
+        let triangles = self.pending_triangles();
+        progress(&format!("level {}: {} clusters, {triangles} triangles", self.level, self.pending.len()));
+        tracing::info!(
+            level = self.level,
+            clusters = self.pending.len(),
+            triangles,
+            groups = parts.len(),
+            "level built"
+        );
+        progressed
+    }
+
+    /// Simplifies each part (a group of pending clusters, whose triangles are `refs`) in
+    /// parallel, with the positions it shares with other parts locked; `None` where stuck.
+    fn simplify_parts(&self, parts: &[Vec<u32>], refs: &[&[u32]]) -> Vec<Option<Simplified>> {
+        let (mesh, settings) = (self.mesh, self.settings);
         // Which group uses each position; positions used by two groups are locked.
         let mut owner = vec![u32::MAX; mesh.position_count];
         for (g, part) in parts.iter().enumerate() {
@@ -118,8 +138,8 @@ impl<'a> Builder<'a> {
             owner[p] == u32::MAX - 1 || always_locked[p]
         };
         let (special, part_size) = (&self.special, &self.part_size);
-        let own_errors: Vec<f32> = self.pending.iter().map(|&c| clusters[c].own_error).collect();
-        let results: Vec<Option<Simplified>> = parts
+        let own_errors: Vec<f32> = self.pending.iter().map(|&c| self.clusters[c].own_error).collect();
+        parts
             .par_iter()
             .map(|part| {
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
@@ -138,15 +158,16 @@ impl<'a> Builder<'a> {
                         (s, error)
                     }
                 };
-                Some((
-                    split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings),
-                    error,
-                    s.method,
-                ))
+                let children = split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings);
+                Some((children, error, s.method))
             })
-            .collect();
-        drop(refs);
+            .collect()
+    }
 
+    /// Makes each simplified part a group whose children are pending next; a stuck part's
+    /// clusters stay pending. Returns whether any part was simplified.
+    fn adopt(&mut self, parts: &[Vec<u32>], results: Vec<Option<Simplified>>) -> bool {
+        let clusters = &mut self.clusters;
         let mut next = Vec::new();
         let mut progressed = false;
         for (part, result) in parts.iter().zip(results) {
@@ -167,27 +188,12 @@ impl<'a> Builder<'a> {
             }
             for indices in children {
                 next.push(clusters.len());
-                clusters.push(BuiltCluster {
-                    indices,
-                    own_group: id,
-                    own_sphere: sphere,
-                    own_error: error,
-                    group: NO_GROUP,
-                });
+                let (own_sphere, own_error) = (sphere, error);
+                clusters.push(BuiltCluster { indices, own_group: id, own_sphere, own_error, group: NO_GROUP });
             }
         }
         next.sort_unstable();
         self.pending = next;
-        self.level += 1;
-        let triangles = self.pending_triangles();
-        progress(&format!("level {}: {} clusters, {triangles} triangles", self.level, self.pending.len()));
-        tracing::info!(
-            level = self.level,
-            clusters = self.pending.len(),
-            triangles,
-            groups = parts.len(),
-            "level built"
-        );
         progressed
     }
 

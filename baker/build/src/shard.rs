@@ -74,20 +74,9 @@ pub fn build_sharded<S: TriangleSource, O: DagOutput>(
     // Stage 1: build the shards from their spill files.
     let context = ShardContext { settings, grid, keep_normals, keep_uvs, multi_material: spill.multi_material };
     let mut dag = Collected::new(output);
-    let shards: Vec<Cell<O::Clusters>> = (0..cells.count())
-        .into_par_iter()
-        .map(|s| {
-            let cell = context.build_shard(&source, &spill.path(s), &dag.output)?;
-            let (levels, top) = (cell.levels, cell.top.len());
-            progress(&format!(
-                "shard {}/{}: {} triangles, {levels} levels, {top} top clusters",
-                s + 1,
-                cells.count(),
-                cell.triangles
-            ));
-            Ok(cell)
-        })
-        .collect::<Result<_, BakeError>>()?;
+    let shards = context.build_shards(&source, &spill, cells.count(), &dag.output, progress)?;
+    let (kept, degenerate, multi_material) = (spill.kept, spill.degenerate, spill.multi_material);
+    drop(spill); // removes the spill files
     let importer_dropped = source.dropped();
     drop(source); // the vertex attributes are not needed any more
     stats.shards = shards.len() as u64;
@@ -104,10 +93,9 @@ pub fn build_sharded<S: TriangleSource, O: DagOutput>(
     clock.lap(&mut stats, "merge");
     // What the file records excludes the triangles an in-memory source's importer dropped
     // (the figures include them); kept so for byte-identical output.
-    let file_triangles = spill.kept + spill.degenerate;
-    dag.degenerate += spill.degenerate + importer_dropped;
-    let frame =
-        Frame { grid: grid.0, uv: grid.1, normals: keep_normals, uvs: keep_uvs, multi_material: spill.multi_material };
+    let file_triangles = kept + degenerate;
+    dag.degenerate += degenerate + importer_dropped;
+    let frame = Frame { grid: grid.0, uv: grid.1, normals: keep_normals, uvs: keep_uvs, multi_material };
     Ok(dag.finish(frame, file_triangles, file_triangles + importer_dropped, stats))
 }
 
@@ -150,13 +138,7 @@ impl Spill {
             }
             spill.multi_material |= *first_material.get_or_insert(material) != material;
             let centroid = [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k]) / 3.0);
-            let [a, b, c] = t.map(|c| [c.v, c.vt, c.vn]);
-            let record: Record = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2], material];
-            let mut bytes = [0u8; RECORD_BYTES];
-            for (chunk, w) in bytes.chunks_exact_mut(4).zip(record) {
-                chunk.copy_from_slice(&w.to_ne_bytes());
-            }
-            if let Err(e) = writers[cells.cell_of(centroid)].write_all(&bytes) {
+            if let Err(e) = writers[cells.cell_of(centroid)].write_all(&record_bytes(t, material)) {
                 io_error.get_or_insert(e);
             }
             spill.kept += 1;
@@ -186,6 +168,16 @@ impl Spill {
         let word = |b: &[u8]| u32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
         Ok(bytes.chunks_exact(RECORD_BYTES).map(|r| std::array::from_fn(|k| word(&r[4 * k..]))).collect())
     }
+}
+
+/// The spill record of a triangle.
+fn record_bytes(t: [Corner; 3], material: u32) -> [u8; RECORD_BYTES] {
+    let words = t.iter().flat_map(|c| [c.v, c.vt, c.vn]).chain([material]);
+    let mut bytes = [0u8; RECORD_BYTES];
+    for (chunk, w) in bytes.chunks_exact_mut(4).zip(words) {
+        chunk.copy_from_slice(&w.to_ne_bytes());
+    }
+    bytes
 }
 
 /// The corners of a spill record.
@@ -295,6 +287,27 @@ struct ShardContext<'a> {
 }
 
 impl ShardContext<'_> {
+    /// Builds the first levels of every shard, in parallel, in cell order.
+    fn build_shards<O: DagOutput>(
+        &self,
+        source: &impl TriangleSource,
+        spill: &Spill,
+        count: usize,
+        output: &O,
+        progress: Progress,
+    ) -> Result<Vec<Cell<O::Clusters>>, BakeError> {
+        (0..count)
+            .into_par_iter()
+            .map(|s| {
+                let cell = self.build_shard(source, &spill.path(s), output)?;
+                let (levels, top) = (cell.levels, cell.top.len());
+                let triangles = cell.triangles;
+                progress(&format!("shard {}/{count}: {triangles} triangles, {levels} levels, {top} top clusters", s + 1));
+                Ok(cell)
+            })
+            .collect()
+    }
+
     /// Reads a spill file and builds the shard's first levels.
     fn build_shard<O: DagOutput>(
         &self,
