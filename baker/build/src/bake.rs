@@ -1,17 +1,17 @@
-//! One bake: import → weld → DAG → `.mres` bytes.
+//! One bake: open the source, build its DAG whole or in shards, write `.mres` bytes.
 
-use crate::dag::{build_dag, BuildStats};
+use crate::dag::BuiltDag;
+use crate::encode::{write, Encoder};
 pub use crate::error::BakeError;
 pub use crate::progress::Progress;
 use crate::settings::BakeSettings;
-use crate::shard::{build_sharded, ShardSource};
-use crate::weld::weld;
-use mres_import::mesh::{Corner, NONE};
-use mres_import::obj_stream::ObjVertices;
-use mres_import::SourceMesh;
-use mres_import::{import_file, ImportLimits, InputKind};
+use crate::shard::build_sharded;
+pub use crate::source::Source;
+use crate::whole::build_whole;
 use std::path::Path;
 use std::time::Instant;
+
+pub use crate::dag::BuildStats;
 
 /// The result of baking one mesh.
 pub struct Baked {
@@ -44,139 +44,55 @@ pub struct BakeStats {
     pub bytes: u64,
 }
 
-/// Imports and bakes the mesh file at `path`.
-pub fn bake_file(path: &Path, settings: &BakeSettings) -> Result<Baked, BakeError> {
-    bake_file_with_progress(path, settings, &|_| {})
-}
-
-/// [`bake_file`], reporting each stage to `progress`.
-pub fn bake_file_with_progress(path: &Path, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
+/// Imports the mesh file at `path` (a large OBJ is streamed) and bakes it, reporting each
+/// stage to `progress` (`&|_| {}` for none).
+pub fn bake_file(path: &Path, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
     let _span = tracing::info_span!("bake", path = %path.display()).entered();
     let start = Instant::now();
     progress("import");
-    let limits = ImportLimits::default();
-    // A large OBJ is read in two streaming passes, so that it never has to fit in memory as
-    // text plus a mesh; if it is large enough to shard, the shards are fed from the file.
-    let size = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
-    if InputKind::from_path(path) == Some(InputKind::Obj)
-        && size / OBJ_MIN_BYTES_PER_TRIANGLE > settings.shard_triangles
-    {
-        settings.check().map_err(BakeError::Settings)?;
-        let mut obj = ObjVertices::read(path, &limits)?;
-        if obj.triangles > settings.shard_triangles {
-            let import_seconds = start.elapsed().as_secs_f64();
-            tracing::info!(triangles = obj.triangles, seconds = import_seconds, "streaming import, pass 1");
-            let (positions, normals, uvs) =
-                (std::mem::take(&mut obj.positions), std::mem::take(&mut obj.normals), std::mem::take(&mut obj.uvs));
-            let triangles = obj.triangles;
-            let for_each_triangle = Box::new(move |f: &mut dyn FnMut([Corner; 3], u32)| obj.for_each_triangle(path, f));
-            let source = ShardSource { positions, normals, uvs, triangles, for_each_triangle };
-            let mut baked = bake_sharded(source, settings, progress)?;
-            baked.stats.import_seconds = import_seconds;
-            return Ok(baked);
-        }
-    }
-    let mesh = import_file(path, &limits)?;
+    let source = Source::open(path, settings.shard_triangles)?;
     let import_seconds = start.elapsed().as_secs_f64();
-    tracing::info!(triangles = mesh.triangle_count(), seconds = import_seconds, "imported");
-    let mut baked = bake_mesh_with_progress(mesh, settings, progress)?;
-    baked.stats.import_seconds = import_seconds;
-    Ok(baked)
+    tracing::info!(seconds = import_seconds, streamed = matches!(source, Source::Obj(_)), "imported");
+    let baked = bake(source, settings, progress)?;
+    Ok(Baked { stats: BakeStats { import_seconds, ..baked.stats }, ..baked })
 }
 
-/// Bakes an imported mesh (consumed, so its memory is freed once welded).
-pub fn bake_mesh(mesh: SourceMesh, settings: &BakeSettings) -> Result<Baked, BakeError> {
-    bake_mesh_with_progress(mesh, settings, &|_| {})
-}
-
-/// [`bake_mesh`], reporting each stage to `progress`.
-pub fn bake_mesh_with_progress(
-    mesh: SourceMesh,
+/// Bakes `source` (consumed, so that its memory is freed as soon as it has been read): whole
+/// if it has at most `settings.shard_triangles` triangles, else in shards.
+pub fn bake<'p>(
+    source: impl Into<Source<'p>>,
     settings: &BakeSettings,
     progress: Progress,
 ) -> Result<Baked, BakeError> {
     settings.check().map_err(BakeError::Settings)?;
-    if mesh.triangle_count() as u64 > settings.shard_triangles {
-        let SourceMesh { positions, normals, uvs, indices, materials, degenerate_dropped } = mesh;
-        let index_or_none = |present: bool| if present { |v: u32| v } else { |_: u32| NONE };
-        let (vn, vt) = (index_or_none(normals.is_some()), index_or_none(uvs.is_some()));
-        let triangles = materials.len() as u64;
-        let for_each_triangle = Box::new(move |f: &mut dyn FnMut([Corner; 3], u32)| {
-            for (t, &material) in indices.chunks_exact(3).zip(&materials) {
-                f([0, 1, 2].map(|k| Corner { v: t[k], vt: vt(t[k]), vn: vn(t[k]) }), material);
-            }
-            Ok(())
-        });
-        let source = ShardSource {
-            positions,
-            normals: normals.unwrap_or_default(),
-            uvs: uvs.unwrap_or_default(),
-            triangles,
-            for_each_triangle,
-        };
-        let mut baked = bake_sharded(source, settings, progress)?;
-        baked.stats.degenerate_dropped += degenerate_dropped;
-        baked.stats.source_triangles += degenerate_dropped;
-        return Ok(baked);
-    }
     let start = Instant::now();
-    progress(&format!("weld: {} triangles", mesh.triangle_count()));
-    let welded = weld(&mesh, settings);
-    let weld_seconds = start.elapsed().as_secs_f64();
-    let source_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
-    drop(mesh);
-    let welded = match welded {
-        Some(w) if !w.indices.is_empty() => w,
-        _ => return Err(BakeError::Empty(source_triangles)),
+    let output = Encoder::new(settings);
+    let dag = match source.into() {
+        Source::Mesh(mesh) if mesh.triangle_count() as u64 <= settings.shard_triangles => {
+            build_whole(mesh, settings, progress, output)?
+        }
+        source => build_sharded(source, settings, progress, output)?,
     };
-    let (dag, mut build) = build_dag(&welded, settings, progress);
-    build.stage_seconds.insert(0, ("weld".into(), weld_seconds));
-    let mut stats = BakeStats {
-        source_triangles,
-        degenerate_dropped: welded.degenerate_dropped,
-        welded_vertices: welded.positions.len() as u64,
-        groups: dag.groups.len() as u64,
-        clusters: dag.clusters.len() as u64,
-        build,
-        ..Default::default()
-    };
-    drop(welded);
+    let stats = stats(&dag);
     progress("write");
     let write_start = Instant::now();
-    let bytes = mres_format::write_mres(&dag, settings.zstd_level)?;
+    let bytes = write(dag, settings.zstd_level)?;
+    let mut stats = BakeStats { bytes: bytes.len() as u64, build_seconds: start.elapsed().as_secs_f64(), ..stats };
     stats.build.stage_seconds.push(("write".into(), write_start.elapsed().as_secs_f64()));
-    tracing::info!(bytes = bytes.len(), groups = stats.groups, clusters = stats.clusters, stages = ?stats.build.stage_seconds, "baked");
-    Ok(Baked {
-        stats: BakeStats { bytes: bytes.len() as u64, build_seconds: start.elapsed().as_secs_f64(), ..stats },
-        bytes,
-    })
+    let (groups, clusters, stages) = (stats.groups, stats.clusters, &stats.build.stage_seconds);
+    tracing::info!(bytes = bytes.len(), groups, clusters, shards = stats.build.shards, stages = ?stages, "baked");
+    Ok(Baked { bytes, stats })
 }
 
-/// The fewest bytes an OBJ triangle takes ("f 1 2 3\n" is 8, before any `v` line): files
-/// smaller than this times `shard_triangles` cannot need sharding and are imported whole.
-const OBJ_MIN_BYTES_PER_TRIANGLE: u64 = 8;
-
-/// Bakes a mesh in shards (see `shard`); the source is freed once the shards are read.
-fn bake_sharded(source: ShardSource, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
-    let start = Instant::now();
-    let dag = build_sharded(source, settings, progress)?;
-    progress("write");
-    let write_start = Instant::now();
-    let (groups, clusters) = (dag.groups.len() as u64, dag.clusters.len() as u64);
-    let mut build = dag.stats;
-    let bytes = mres_format::write::write_encoded(&dag.header, &dag.groups, dag.clusters, settings.zstd_level)?;
-    build.stage_seconds.push(("write".into(), write_start.elapsed().as_secs_f64()));
-    tracing::info!(bytes = bytes.len(), groups, clusters, shards = build.shards, stages = ?build.stage_seconds, "baked");
-    let stats = BakeStats {
-        source_triangles: dag.header.source_triangles,
+/// The figures of a built DAG (the file's size and the times are added when written).
+fn stats(dag: &BuiltDag<Encoder>) -> BakeStats {
+    BakeStats {
+        source_triangles: dag.source_triangles,
         degenerate_dropped: dag.degenerate_dropped,
         welded_vertices: dag.welded_vertices,
-        groups,
-        clusters,
-        build,
-        import_seconds: 0.0,
-        build_seconds: start.elapsed().as_secs_f64(),
-        bytes: bytes.len() as u64,
-    };
-    Ok(Baked { bytes, stats })
+        groups: dag.groups.len() as u64,
+        clusters: dag.clusters.count() as u64,
+        build: dag.stats.clone(),
+        ..Default::default()
+    }
 }

@@ -1,31 +1,28 @@
-//! DAG assembly: level-0 clusters, then repeatedly group (METIS), simplify each group in
-//! parallel with its border locked, and split the result into parent clusters, until one root
-//! group remains (DESIGN.md "The idea in one paragraph"; seed 000 §3.1, seed 002 §3.5).
+//! The builder's own DAG: groups and clusters as the level loop makes them, in welded vertex
+//! ids, and the [`DagOutput`] that receives them (the `.mres` writer's adapter is `encode`).
 //!
 //! Errors and spheres are made monotone while building: a group's error is the max of its
 //! simplification error and its members' own errors, and its sphere encloses its members'
-//! own spheres. The result is independent of the rayon thread count: groups are simplified in
-//! parallel but collected in partition order.
+//! own spheres (docs/INVARIANTS.md §2).
 
-use crate::cluster::{bounding_sphere, enclosing_sphere, split};
-use crate::deviation::{part_sizes, simplify_measured};
-use crate::partition::{cluster_graph, partition};
-use crate::settings::{BakeSettings, ErrorBound};
-use crate::simplify::{simplify_group, Method};
-use crate::weld::WeldedMesh;
-use mres_format::{Dag, DagCluster, Group, Header, Sphere, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS, NO_GROUP};
-use mres_geom::edges::sorted_edge_keys;
-use rayon::prelude::*;
+use crate::error::BakeError;
+use crate::weld::{GridMesh, WeldedMesh};
+use mres_format::{Grid, Sphere, UvQuant, NO_GROUP};
 
-/// Most clusters the final root group may hold. A mesh whose coarsest clusters cannot be
-/// simplified further (an open boundary is locked in every cut) ends in one root group of up
-/// to this many clusters; beyond it, several root groups are formed and reported.
-pub const MAX_ROOT_CLUSTERS: usize = 256;
-/// Safety stop on the number of levels.
-const MAX_LEVELS: u32 = 64;
+/// One group of the DAG.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuiltGroup {
+    /// Encloses the spheres of its members (and so of everything below them).
+    pub sphere: Sphere,
+    /// Object-space error of the clusters it produced (+inf for a root group).
+    pub error: f32,
+    /// Simplification level: 0 for groups of level-0 clusters.
+    pub level: u32,
+}
 
-/// One cluster while building.
-pub(crate) struct Cluster {
+/// One cluster while building, in the vertex ids of the welded mesh it was built on.
+#[derive(Clone, Debug)]
+pub struct BuiltCluster {
     /// Triangle list into the welded mesh's vertices.
     pub indices: Vec<u32>,
     /// The group that produced it, or `NO_GROUP`.
@@ -38,8 +35,66 @@ pub(crate) struct Cluster {
     pub group: u32,
 }
 
-/// One simplified group: its triangles split into parent clusters, its error, the method used.
-type Simplified = (Vec<Vec<u32>>, f32, Method);
+/// Receives the finished clusters of each welded mesh the DAG is built on, while that mesh
+/// is still alive (the idea of meshoptimizer clusterlod's `clodOutput` callback): a sharded
+/// build frees each shard's mesh once its clusters are handed over, so what the output keeps
+/// sets the build's memory. Group ids in a batch are local to it until [`DagOutput::append`].
+pub trait DagOutput: Sync {
+    /// One mesh's finished clusters, converted.
+    type Clusters: Send;
+    /// Converts `clusters` (each with its group set) of `mesh`; called from any thread.
+    fn convert(&self, mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Result<Self::Clusters, BakeError>;
+    /// Takes a converted batch in, mapping its group ids to the DAG's with `global`.
+    fn append(&mut self, clusters: Self::Clusters, global: &dyn Fn(u32) -> u32);
+}
+
+/// Quantization and attributes shared by every cluster of a DAG.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    /// The position grid.
+    pub grid: Grid,
+    /// The UV quantization.
+    pub uv: UvQuant,
+    /// Whether vertices have normals.
+    pub normals: bool,
+    /// Whether vertices have UVs.
+    pub uvs: bool,
+    /// Whether more than one material occurs.
+    pub multi_material: bool,
+}
+
+impl Frame {
+    /// The frame of a welded mesh.
+    pub fn of(mesh: &WeldedMesh) -> Frame {
+        Frame {
+            grid: mesh.grid,
+            uv: mesh.uv,
+            normals: mesh.normals.is_some(),
+            uvs: mesh.uvs.is_some(),
+            multi_material: mesh.multi_material,
+        }
+    }
+}
+
+/// A built DAG: its groups in id order, its clusters as `O` keeps them, and figures.
+pub struct BuiltDag<O> {
+    /// Quantization and attributes.
+    pub frame: Frame,
+    /// Every group; a cluster's group ids index this.
+    pub groups: Vec<BuiltGroup>,
+    /// Every cluster, as the output converted them.
+    pub clusters: O,
+    /// Triangles read, as the file records them (see [`BuiltDag::source_triangles`]).
+    pub file_triangles: u64,
+    /// Triangles in the source, the importer's dropped ones included.
+    pub source_triangles: u64,
+    /// Triangles dropped as degenerate (importer, spilling and grid welding).
+    pub degenerate_dropped: u64,
+    /// Welded vertices (a sharded build counts shard-border vertices in each shard).
+    pub welded_vertices: u64,
+    /// Figures about the build.
+    pub stats: BuildStats,
+}
 
 /// Figures about one build, for reports.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -65,6 +120,8 @@ impl BuildStats {
             *a += b;
         }
         self.stuck_groups += other.stuck_groups;
+        self.root_groups += other.root_groups;
+        self.root_clusters += other.root_clusters;
     }
 }
 
@@ -83,329 +140,103 @@ impl StageClock {
     }
 }
 
-/// Builds the cluster DAG of a welded mesh.
-pub fn build_dag(mesh: &WeldedMesh, settings: &BakeSettings, progress: crate::progress::Progress) -> (Dag, BuildStats) {
-    let mut clock = StageClock::start();
-    let mut builder = Builder::new(mesh, settings, level0(mesh, settings), 0, 0);
-    clock.lap(&mut builder.stats, "level 0");
-    progress(&format!("level 0: {} clusters", builder.clusters.len()));
-    while builder.step(progress) {}
-    builder.make_roots();
-    clock.lap(&mut builder.stats, "levels");
-    let mut stats = std::mem::take(&mut builder.stats);
-    let (groups, clusters) = (builder.groups, builder.clusters);
-    let dag = Dag { header: header(mesh, settings), groups, clusters: to_dag_clusters(mesh, clusters) };
-    clock.lap(&mut stats, "encode");
-    (dag, stats)
+/// A cluster left without a group when its mesh is done (a shard's coarsest), carried into
+/// the next mesh on the grid: its vertices are welded there by their integer grid points.
+pub struct TopCluster {
+    /// Its vertices (first-use order) and triangles.
+    pub mesh: GridMesh,
+    /// The group that produced it, or `NO_GROUP`.
+    pub own_group: u32,
+    /// Own sphere.
+    pub own_sphere: Sphere,
+    /// Own error.
+    pub own_error: f32,
 }
 
-/// Level-0 clusters of a welded mesh, with their own bounds.
-pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings) -> Vec<Cluster> {
-    level0_clusters(mesh, settings)
-        .into_par_iter()
-        .map(|indices| {
-            let own_sphere = bounding_sphere(&indices, &mesh.positions);
-            Cluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP }
-        })
-        .collect()
+impl TopCluster {
+    /// `cluster` of `mesh`, with its vertices in first-use order.
+    pub fn new(mesh: &WeldedMesh, cluster: &BuiltCluster) -> TopCluster {
+        let (vertices, local) = meshopt::extract_meshlet_indices(&cluster.indices);
+        let local = local.into_iter().map(u32::from).collect();
+        TopCluster {
+            mesh: GridMesh::extract(mesh, &vertices, local),
+            own_group: cluster.own_group,
+            own_sphere: cluster.own_sphere,
+            own_error: cluster.own_error,
+        }
+    }
+
+    /// Its triangle count.
+    pub fn triangles(&self) -> u64 {
+        self.mesh.indices.len() as u64 / 3
+    }
 }
 
-/// The level loop over one welded mesh: group the pending clusters, simplify each group with
-/// its border locked, split the results into the next level's clusters.
-pub(crate) struct Builder<'a> {
-    mesh: &'a WeldedMesh,
-    settings: &'a BakeSettings,
-    /// Per position id: on an open or non-manifold edge of this mesh, so locked at every level.
-    always_locked: Vec<bool>,
-    /// Open and non-manifold edges with their use counts (see `open_and_nonmanifold`).
-    special: Vec<(u64, u32)>,
-    /// Per position id, the size of its connected part (see `deviation::part_sizes`).
-    part_size: Vec<f32>,
-    /// Every cluster built so far.
-    pub clusters: Vec<Cluster>,
-    /// Every group formed so far; ids are `first_group` + index.
-    pub groups: Vec<Group>,
-    /// Id of `groups[0]` in the final DAG.
-    first_group: u32,
-    /// Clusters without a group yet, ascending.
-    pub pending: Vec<usize>,
+/// Group ids a mesh's level loop assigns are local until its [`Cell`] is collected: this bit
+/// marks them (ids without it are global already).
+pub(crate) const LOCAL: u32 = 1 << 31;
+
+/// What the level loop leaves on one welded mesh (a whole mesh, a shard or a later cell).
+pub(crate) struct Cell<C> {
+    /// New groups; the group `LOCAL | i` is `groups[i]`.
+    pub groups: Vec<BuiltGroup>,
+    /// Finished clusters, converted by the output.
+    pub finished: C,
+    /// Clusters without a group yet.
+    pub top: Vec<TopCluster>,
     /// The level the next groups get.
-    pub level: u32,
+    pub levels: u32,
     pub stats: BuildStats,
+    /// Triangles it was built from (shards only).
+    pub triangles: u64,
+    pub welded_vertices: u64,
+    pub degenerate: u64,
 }
 
-impl<'a> Builder<'a> {
-    /// A builder whose pending clusters are `clusters` (triangles into `mesh`); new groups
-    /// start at `level` and get ids from `first_group` on.
-    pub fn new(
-        mesh: &'a WeldedMesh,
-        settings: &'a BakeSettings,
-        clusters: Vec<Cluster>,
-        level: u32,
-        first_group: u32,
-    ) -> Self {
-        let (always_locked, special) = open_and_nonmanifold(mesh);
-        let part_size = match settings.error_bound {
-            ErrorBound::Measured => part_sizes(mesh),
-            ErrorBound::Simplifier => Vec::new(),
-        };
-        let pending = (0..clusters.len()).collect();
-        let stats = BuildStats::default();
-        Builder {
-            mesh,
-            settings,
-            always_locked,
-            special,
-            part_size,
-            clusters,
-            groups: Vec::new(),
-            first_group,
-            pending,
-            level,
+/// The groups and clusters collected so far, under global ids.
+pub(crate) struct Collected<O> {
+    pub groups: Vec<BuiltGroup>,
+    pub output: O,
+    /// The highest level reached by any cell so far.
+    pub level: u32,
+    pub welded_vertices: u64,
+    pub degenerate: u64,
+}
+
+impl<O: DagOutput> Collected<O> {
+    pub fn new(output: O) -> Self {
+        Collected { groups: Vec::new(), output, level: 0, welded_vertices: 0, degenerate: 0 }
+    }
+
+    /// Takes the cells in order, giving their local groups global ids; returns their top
+    /// clusters.
+    pub fn collect(&mut self, cells: Vec<Cell<O::Clusters>>, stats: &mut BuildStats) -> Vec<TopCluster> {
+        let mut top = Vec::new();
+        for cell in cells {
+            let offset = self.groups.len() as u32;
+            let global = |g: u32| if g != NO_GROUP && g & LOCAL != 0 { (g & !LOCAL) + offset } else { g };
+            self.groups.extend(cell.groups);
+            self.output.append(cell.finished, &global);
+            top.extend(cell.top.into_iter().map(|t| TopCluster { own_group: global(t.own_group), ..t }));
+            stats.add(&cell.stats);
+            self.welded_vertices += cell.welded_vertices;
+            self.degenerate += cell.degenerate;
+            self.level = self.level.max(cell.levels);
+        }
+        top
+    }
+
+    /// The DAG collected, with the figures its builder adds.
+    pub fn finish(self, frame: Frame, file_triangles: u64, source_triangles: u64, stats: BuildStats) -> BuiltDag<O> {
+        BuiltDag {
+            frame,
+            groups: self.groups,
+            clusters: self.output,
+            file_triangles,
+            source_triangles,
+            degenerate_dropped: self.degenerate,
+            welded_vertices: self.welded_vertices,
             stats,
         }
-    }
-
-    /// Triangles in the pending clusters.
-    pub fn pending_triangles(&self) -> usize {
-        self.pending.iter().map(|&c| self.clusters[c].indices.len() / 3).sum()
-    }
-
-    /// Builds one level. Returns false (and changes nothing) when there is nothing left to
-    /// group, and false after a level where no group could be simplified.
-    pub fn step(&mut self, progress: crate::progress::Progress) -> bool {
-        if self.pending.len() <= 1 || self.level >= MAX_LEVELS {
-            return false;
-        }
-        let (mesh, settings, clusters) = (self.mesh, self.settings, &mut self.clusters);
-        let refs: Vec<&[u32]> = self.pending.iter().map(|&c| clusters[c].indices.as_slice()).collect();
-        let centers: Vec<[f32; 3]> = self.pending.iter().map(|&c| clusters[c].own_sphere.center).collect();
-        let graph = cluster_graph(&refs, &mesh.position_ids, &centers);
-        let parts = partition(&graph, settings.group_size as usize);
-        // Which group uses each position; positions used by two groups are locked.
-        let mut owner = vec![u32::MAX; mesh.position_count];
-        for (g, part) in parts.iter().enumerate() {
-            for &c in part {
-                for &v in refs[c as usize] {
-                    let o = &mut owner[mesh.position_ids[v as usize] as usize];
-                    *o = if *o == u32::MAX || *o == g as u32 { g as u32 } else { u32::MAX - 1 };
-                }
-            }
-        }
-        let always_locked = &self.always_locked;
-        let locked = |v: u32| {
-            let p = mesh.position_ids[v as usize] as usize;
-            owner[p] == u32::MAX - 1 || always_locked[p]
-        };
-        let (special, part_size) = (&self.special, &self.part_size);
-        let own_errors: Vec<f32> = self.pending.iter().map(|&c| clusters[c].own_error).collect();
-        let results: Vec<Option<Simplified>> = parts
-            .par_iter()
-            .map(|part| {
-                let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
-                let (s, error) = match settings.error_bound {
-                    ErrorBound::Measured => {
-                        // Per input triangle, the own error of the member it came from.
-                        let errors: Vec<f32> = part
-                            .iter()
-                            .flat_map(|&c| std::iter::repeat_n(own_errors[c as usize], refs[c as usize].len() / 3))
-                            .collect();
-                        simplify_measured(mesh, &merged, &errors, locked, special, settings, part_size)?
-                    }
-                    ErrorBound::Simplifier => {
-                        let s = simplify_group(mesh, &merged, locked, special, settings)?;
-                        let error = s.error;
-                        (s, error)
-                    }
-                };
-                Some((
-                    split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings),
-                    error,
-                    s.method,
-                ))
-            })
-            .collect();
-        drop(refs);
-
-        let mut next = Vec::new();
-        let mut progressed = false;
-        for (part, result) in parts.iter().zip(results) {
-            let members: Vec<usize> = part.iter().map(|&c| self.pending[c as usize]).collect();
-            let Some((children, error, method)) = result else {
-                self.stats.stuck_groups += 1;
-                next.extend_from_slice(&members);
-                continue;
-            };
-            progressed = true;
-            self.stats.methods[method as usize] += 1;
-            let id = self.first_group + self.groups.len() as u32;
-            let sphere = enclosing_sphere(members.iter().map(|&c| clusters[c].own_sphere));
-            let error = members.iter().map(|&c| clusters[c].own_error).fold(error, f32::max);
-            self.groups.push(Group { sphere, error, level: self.level, first_cluster: 0, cluster_count: 0, page: 0 });
-            for &c in &members {
-                clusters[c].group = id;
-            }
-            for indices in children {
-                next.push(clusters.len());
-                clusters.push(Cluster {
-                    indices,
-                    own_group: id,
-                    own_sphere: sphere,
-                    own_error: error,
-                    group: NO_GROUP,
-                });
-            }
-        }
-        next.sort_unstable();
-        self.pending = next;
-        self.level += 1;
-        let triangles = self.pending_triangles();
-        progress(&format!("level {}: {} clusters, {triangles} triangles", self.level, self.pending.len()));
-        tracing::info!(
-            level = self.level,
-            clusters = self.pending.len(),
-            triangles,
-            groups = parts.len(),
-            "level built"
-        );
-        progressed
-    }
-
-    /// Makes the pending clusters the root group(s): whatever could not be simplified further.
-    /// Error +inf: always drawn when nothing coarser exists.
-    pub fn make_roots(&mut self) {
-        let pending = std::mem::take(&mut self.pending);
-        let roots: Vec<Vec<usize>> = if pending.len() <= MAX_ROOT_CLUSTERS {
-            vec![pending.clone()]
-        } else {
-            let refs: Vec<&[u32]> = pending.iter().map(|&c| self.clusters[c].indices.as_slice()).collect();
-            let centers: Vec<[f32; 3]> = pending.iter().map(|&c| self.clusters[c].own_sphere.center).collect();
-            let graph = cluster_graph(&refs, &self.mesh.position_ids, &centers);
-            partition(&graph, self.settings.group_size as usize)
-                .into_iter()
-                .map(|p| p.into_iter().map(|c| pending[c as usize]).collect())
-                .collect()
-        };
-        self.stats.root_groups = roots.len() as u64;
-        self.stats.root_clusters = pending.len() as u64;
-        for members in roots {
-            let id = self.first_group + self.groups.len() as u32;
-            let sphere = enclosing_sphere(members.iter().map(|&c| self.clusters[c].own_sphere));
-            let level = self.level;
-            self.groups.push(Group {
-                sphere,
-                error: f32::INFINITY,
-                level,
-                first_cluster: 0,
-                cluster_count: 0,
-                page: 0,
-            });
-            for &c in &members {
-                self.clusters[c].group = id;
-            }
-        }
-    }
-}
-
-/// Triangles per chunk of the level-0 split: chunks are clustered in parallel.
-const LEVEL0_CHUNK: usize = 128 * 512;
-
-/// Level-0 clusters: triangles sorted by the Morton code of their centroid and cut into chunks
-/// of [`LEVEL0_CHUNK`] triangles, each split by the meshlet builder on its own thread (one call
-/// on the whole mesh would run on one core). Only each chunk's last cluster can be partial.
-fn level0_clusters(mesh: &WeldedMesh, settings: &BakeSettings) -> Vec<Vec<u32>> {
-    let centroids: Vec<[f32; 3]> = mesh
-        .indices
-        .par_chunks_exact(3)
-        .map(|t| {
-            let p = t.iter().map(|&v| mesh.positions[v as usize]);
-            p.fold([0.0; 3], |a, b| [a[0] + b[0] / 3.0, a[1] + b[1] / 3.0, a[2] + b[2] / 3.0])
-        })
-        .collect();
-    let codes = crate::partition::morton_codes(&centroids);
-    drop(centroids);
-    let mut order: Vec<(u32, u32)> = codes.into_iter().enumerate().map(|(t, code)| (code, t as u32)).collect();
-    order.par_sort_unstable();
-    order
-        .par_chunks(LEVEL0_CHUNK)
-        .flat_map_iter(|chunk| {
-            let indices: Vec<u32> = chunk
-                .iter()
-                .flat_map(|&(_, t)| mesh.indices[t as usize * 3..t as usize * 3 + 3].iter().copied())
-                .collect();
-            split(&indices, &mesh.positions, settings.max_triangles as usize, settings)
-        })
-        .collect()
-}
-
-/// The original's open (used once) and non-manifold (used 3+ times) edges, with their use
-/// counts, sorted; and per position whether it lies on one. Those positions stay locked at
-/// every level so that every cut has exactly the original's boundary.
-fn open_and_nonmanifold(mesh: &WeldedMesh) -> (Vec<bool>, Vec<(u64, u32)>) {
-    let mut edges: Vec<u64> = mesh
-        .indices
-        .par_chunks(3 * 4096)
-        .flat_map_iter(|c| sorted_edge_keys(c, |v| mesh.position_ids[v as usize]))
-        .collect();
-    edges.par_sort_unstable();
-    let mut locked = vec![false; mesh.position_count];
-    let mut special = Vec::new();
-    for run in edges.chunk_by(|a, b| a == b) {
-        if run.len() != 2 {
-            locked[(run[0] >> 32) as usize] = true;
-            locked[(run[0] & 0xffff_ffff) as usize] = true;
-            special.push((run[0], run.len() as u32));
-        }
-    }
-    (locked, special)
-}
-
-/// The file header for a mesh welded with `settings`.
-pub(crate) fn header(mesh: &WeldedMesh, settings: &BakeSettings) -> Header {
-    let mut flags = 0;
-    if mesh.normals.is_some() {
-        flags |= FLAG_NORMALS;
-    }
-    if mesh.uvs.is_some() {
-        flags |= FLAG_UVS;
-    }
-    if mesh.multi_material {
-        flags |= FLAG_MATERIALS;
-    }
-    Header {
-        flags,
-        grid: mesh.grid,
-        uv: mesh.uv,
-        normal_bits: settings.normal_bits,
-        position_bits: settings.position_bits,
-        level_count: 0,
-        source_triangles: mesh.source_triangles,
-    }
-}
-
-/// Converts built clusters to the writer's logical clusters: per cluster, a local vertex
-/// array (grid positions, normals, UVs) and 8-bit local indices.
-pub(crate) fn to_dag_clusters(mesh: &WeldedMesh, clusters: Vec<Cluster>) -> Vec<DagCluster> {
-    clusters.into_par_iter().map(|c| to_dag_cluster(mesh, &c)).collect()
-}
-
-/// One cluster in the writer's form.
-pub(crate) fn to_dag_cluster(mesh: &WeldedMesh, c: &Cluster) -> DagCluster {
-    // Local vertex array and 8-bit indices. (meshopt_optimizeMeshletLevel 3 shrank the
-    // compressed indices by 2% on the sphere but took 17% of the bake: not worth it.)
-    let (vertices, indices) = meshopt::extract_meshlet_indices(&c.indices);
-    let triangle_vertex: Vec<u32> = indices.chunks_exact(3).map(|t| vertices[t[0] as usize]).collect();
-    DagCluster {
-        group: c.group,
-        own_group: c.own_group,
-        positions: vertices.iter().map(|&v| mesh.grid_positions[v as usize]).collect(),
-        normals: mesh.normals.as_ref().map(|n| vertices.iter().map(|&v| n[v as usize]).collect()).unwrap_or_default(),
-        uvs: mesh.uvs.as_ref().map(|u| vertices.iter().map(|&v| u[v as usize]).collect()).unwrap_or_default(),
-        materials: if mesh.multi_material {
-            triangle_vertex.iter().map(|&v| mesh.materials[v as usize].min(u16::MAX as u32) as u16).collect()
-        } else {
-            Vec::new()
-        },
-        indices,
     }
 }

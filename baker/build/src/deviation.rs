@@ -1,4 +1,4 @@
-//! The honest group error (DESIGN.md invariant 4): a group's stored error must bound the
+//! The honest group error (docs/INVARIANTS.md §4): a group's stored error must bound the
 //! distance between its simplified triangles and the level-0 surface they replace, both ways.
 //!
 //! meshoptimizer reports an estimate for one simplification step, measured against the step's

@@ -10,13 +10,14 @@ pub enum BakeError {
     /// The settings are out of range.
     #[error("settings: {0}")]
     Settings(String),
-    /// A sharded build failed (its spill files, or merging the shards).
+    /// A sharded build could not use its spill files.
     #[error("sharding: {0}")]
     Shard(String),
     /// The mesh has no triangles left after welding.
     #[error("no triangles left after welding (all {0} were degenerate)")]
     Empty(u64),
-    /// The DAG could not be written (a bug: the builder broke a format limit).
+    /// The `.mres` writer refused a cluster or the DAG (a format limit broken: a builder bug),
+    /// or zstd failed.
     #[error("writing .mres: {0}")]
     Write(#[from] mres_format::write::WriteError),
 }

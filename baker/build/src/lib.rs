@@ -1,17 +1,22 @@
-//! The DAG builder: weld, shard, cluster, group (METIS), simplify (meshopt, locked borders),
-//! assemble the cluster DAG and encode it as `.mres` (`docs/ARCHITECTURE.md` "One bake").
+//! The DAG builder: open a source, weld, shard if large, cluster, group (METIS), simplify
+//! (meshopt, locked borders), and hand the DAG to the `.mres` writer through `encode`
+//! (`docs/ARCHITECTURE.md` "One bake").
 #![deny(missing_docs)]
 
 pub mod bake;
 pub mod cluster;
 pub mod dag;
 pub mod deviation;
+pub mod encode;
 pub mod error;
+pub mod levels;
 pub mod partition;
 pub mod progress;
 pub mod settings;
 pub mod shard;
 pub mod simplify;
+pub mod source;
 pub mod weld;
+pub mod whole;
 
 pub use settings::BakeSettings;

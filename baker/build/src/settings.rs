@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-/// How a group's stored error is obtained (DESIGN.md invariant 4).
+/// How a group's stored error is obtained (docs/INVARIANTS.md §4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ErrorBound {

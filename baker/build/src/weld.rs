@@ -50,9 +50,11 @@ pub fn weld(mesh: &SourceMesh, settings: &BakeSettings) -> Option<WeldedMesh> {
 /// [`weld`] on a given grid and UV quantization (a shard of a larger mesh uses the whole
 /// mesh's, so that shards meet exactly).
 pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQuant) -> WeldedMesh {
-    let normals = mesh.normals.as_ref().filter(|_| settings.keep_normals);
-    let uvs = mesh.uvs.as_ref().filter(|_| settings.keep_uvs);
-
+    let rows = Rows {
+        grid_point: &|s| grid.quantize(mesh.positions[s]),
+        normals: mesh.normals.as_deref().filter(|_| settings.keep_normals),
+        uvs: mesh.uvs.as_deref().filter(|_| settings.keep_uvs),
+    };
     // Welding units: source vertices, or (source vertex, material) pairs when a vertex can be
     // used by triangles of several materials (a vertex never spans two materials).
     let first_material = mesh.materials.first().copied().unwrap_or(0);
@@ -66,6 +68,101 @@ pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQua
     } else {
         (0..mesh.positions.len() as u32).map(|v| (v, first_material)).collect()
     };
+    let (mut out, unit_vertex) = weld_units(&units, &rows, settings, (grid, uv));
+    out.multi_material = multi_material;
+    let vertex_of = |corner: usize| -> u32 {
+        let src = mesh.indices[corner];
+        if multi_material {
+            let unit = units.binary_search(&(src, mesh.materials[corner / 3])).unwrap_or(0);
+            unit_vertex[unit]
+        } else {
+            unit_vertex[src as usize]
+        }
+    };
+    add_triangles(&mut out, mesh.triangle_count(), vertex_of);
+    out.degenerate_dropped += mesh.degenerate_dropped;
+    out.source_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
+    out
+}
+
+/// Vertices already on a grid, with their attributes and materials: clusters carried from one
+/// welded mesh into the next (the top clusters of sharded builds). Welding them compares grid
+/// points as integers, so vertices that were one grid point stay one.
+#[derive(Clone, Debug, Default)]
+pub struct GridMesh {
+    /// Grid coordinates per vertex.
+    pub positions: Vec<[i32; 3]>,
+    /// Normals per vertex, if kept.
+    pub normals: Option<Vec<[f32; 3]>>,
+    /// UVs per vertex, if kept.
+    pub uvs: Option<Vec<[f32; 2]>>,
+    /// Material per vertex.
+    pub materials: Vec<u32>,
+    /// Triangle list into the vertex arrays.
+    pub indices: Vec<u32>,
+}
+
+impl GridMesh {
+    /// The vertices `vertices` of `mesh` (in that order) and `indices` into them.
+    pub fn extract(mesh: &WeldedMesh, vertices: &[u32], indices: Vec<u32>) -> GridMesh {
+        let pick = || vertices.iter().map(|&v| v as usize);
+        GridMesh {
+            positions: pick().map(|v| mesh.grid_positions[v]).collect(),
+            normals: mesh.normals.as_ref().map(|n| pick().map(|v| n[v]).collect()),
+            uvs: mesh.uvs.as_ref().map(|u| pick().map(|v| u[v]).collect()),
+            materials: pick().map(|v| mesh.materials[v]).collect(),
+            indices,
+        }
+    }
+
+    /// Appends `other`'s vertices and triangles (attributes this mesh lacks are dropped).
+    pub fn append(&mut self, other: &GridMesh) {
+        let base = self.positions.len() as u32;
+        self.positions.extend_from_slice(&other.positions);
+        if let (Some(dst), Some(src)) = (&mut self.normals, &other.normals) {
+            dst.extend_from_slice(src);
+        }
+        if let (Some(dst), Some(src)) = (&mut self.uvs, &other.uvs) {
+            dst.extend_from_slice(src);
+        }
+        self.materials.extend_from_slice(&other.materials);
+        self.indices.extend(other.indices.iter().map(|&i| base + i));
+    }
+}
+
+/// Welds a mesh whose vertices are on `grid` already; `multi_material` is the whole mesh's
+/// flag. Every vertex has one material, so the welding units are the vertices.
+pub fn weld_grid(
+    mesh: &GridMesh,
+    settings: &BakeSettings,
+    (grid, uv): (Grid, UvQuant),
+    multi_material: bool,
+) -> WeldedMesh {
+    let rows = Rows { grid_point: &|s| mesh.positions[s], normals: mesh.normals.as_deref(), uvs: mesh.uvs.as_deref() };
+    let units: Vec<(u32, u32)> = mesh.materials.iter().enumerate().map(|(v, &m)| (v as u32, m)).collect();
+    let (mut out, unit_vertex) = weld_units(&units, &rows, settings, (grid, uv));
+    out.multi_material = multi_material;
+    let triangles = mesh.indices.len() / 3;
+    add_triangles(&mut out, triangles, |corner| unit_vertex[mesh.indices[corner] as usize]);
+    out.source_triangles = triangles as u64;
+    out
+}
+
+/// The per-vertex data welding reads: grid point and attributes of source vertex `s`.
+struct Rows<'a> {
+    grid_point: &'a (dyn Fn(usize) -> [i32; 3] + Sync),
+    normals: Option<&'a [[f32; 3]]>,
+    uvs: Option<&'a [[f32; 2]]>,
+}
+
+/// Welds the units (source vertex, material): the welded vertices (no triangles yet) and the
+/// welded vertex of each unit.
+fn weld_units(
+    units: &[(u32, u32)],
+    rows: &Rows,
+    settings: &BakeSettings,
+    (grid, uv): (Grid, UvQuant),
+) -> (WeldedMesh, Vec<u32>) {
     // Key: grid point, quantized attributes, material. Attributes are compared after
     // quantization so that vertices that encode identically also weld. Sorting by key (ties
     // by unit) makes the numbering deterministic and puts equal grid points next to each other.
@@ -75,10 +172,9 @@ pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQua
         .enumerate()
         .map(|(i, &(src, material))| {
             let s = src as usize;
-            let q = grid.quantize(mesh.positions[s]);
-            let n = normals.map(|n| mres_format::bits::oct_encode(n[s], settings.normal_bits)).unwrap_or([0; 2]);
-            let t = uvs.map(|u| uv.quantize(u[s])).unwrap_or([0; 2]);
-            ((q, n, t, material), i as u32)
+            let n = rows.normals.map(|n| mres_format::bits::oct_encode(n[s], settings.normal_bits)).unwrap_or([0; 2]);
+            let t = rows.uvs.map(|u| uv.quantize(u[s])).unwrap_or([0; 2]);
+            (((rows.grid_point)(s), n, t, material), i as u32)
         })
         .collect();
     keyed.par_sort_unstable();
@@ -90,13 +186,13 @@ pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQua
         positions: Vec::new(),
         position_ids: Vec::new(),
         position_count: 0,
-        normals: normals.map(|_| Vec::new()),
-        uvs: uvs.map(|_| Vec::new()),
+        normals: rows.normals.map(|_| Vec::new()),
+        uvs: rows.uvs.map(|_| Vec::new()),
         materials: Vec::new(),
-        multi_material,
+        multi_material: false,
         indices: Vec::new(),
-        degenerate_dropped: mesh.degenerate_dropped,
-        source_triangles: mesh.triangle_count() as u64 + mesh.degenerate_dropped,
+        degenerate_dropped: 0,
+        source_triangles: 0,
     };
     let mut unit_vertex = vec![0u32; units.len()];
     let mut previous_q = None;
@@ -111,10 +207,10 @@ pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQua
         out.grid_positions.push(q);
         out.positions.push(grid.decode(q));
         out.position_ids.push(out.position_count as u32 - 1);
-        if let (Some(dst), Some(src)) = (out.normals.as_mut(), normals) {
+        if let (Some(dst), Some(src)) = (out.normals.as_mut(), rows.normals) {
             dst.push(src[s]);
         }
-        if let (Some(dst), Some(src)) = (out.uvs.as_mut(), uvs) {
+        if let (Some(dst), Some(src)) = (out.uvs.as_mut(), rows.uvs) {
             dst.push(src[s]);
         }
         out.materials.push(material);
@@ -122,18 +218,13 @@ pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQua
             unit_vertex[unit as usize] = vertex;
         }
     }
-    drop(keyed);
+    (out, unit_vertex)
+}
 
-    let vertex_of = |corner: usize| -> u32 {
-        let src = mesh.indices[corner];
-        if multi_material {
-            let unit = units.binary_search(&(src, mesh.materials[corner / 3])).unwrap_or(0);
-            unit_vertex[unit]
-        } else {
-            unit_vertex[src as usize]
-        }
-    };
-    let triangles: Vec<Option<[u32; 3]>> = (0..mesh.triangle_count())
+/// Adds the `triangles` triangles whose corner `c` is welded vertex `vertex_of(c)`, dropping
+/// those that are degenerate on the grid.
+fn add_triangles(out: &mut WeldedMesh, triangles: usize, vertex_of: impl Fn(usize) -> u32 + Sync) {
+    let welded: Vec<Option<[u32; 3]>> = (0..triangles)
         .into_par_iter()
         .map(|t| {
             let welded = [vertex_of(3 * t), vertex_of(3 * t + 1), vertex_of(3 * t + 2)];
@@ -141,9 +232,8 @@ pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQua
             (p[0] != p[1] && p[1] != p[2] && p[0] != p[2]).then_some(welded)
         })
         .collect();
-    out.indices = triangles.iter().flatten().flatten().copied().collect();
-    out.degenerate_dropped += triangles.iter().filter(|t| t.is_none()).count() as u64;
-    out
+    out.indices = welded.iter().flatten().flatten().copied().collect();
+    out.degenerate_dropped += welded.iter().filter(|t| t.is_none()).count() as u64;
 }
 
 /// The UV quantization covering `uvs`.

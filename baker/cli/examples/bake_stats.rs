@@ -5,7 +5,7 @@ fn main() {
         eprintln!("usage: bake_stats MESH");
         std::process::exit(2);
     };
-    match mres_build::bake::bake_file(std::path::Path::new(&path), &mres_build::BakeSettings::default()) {
+    match mres_build::bake::bake_file(std::path::Path::new(&path), &mres_build::BakeSettings::default(), &|_| {}) {
         Ok(b) => println!("{:#?}", b.stats),
         Err(e) => {
             eprintln!("{e}");

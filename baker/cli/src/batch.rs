@@ -4,7 +4,7 @@
 
 use crate::config::PipelineConfig;
 use cache::{CacheKey, KeyInputs, LocalDisk, Lookup, Storage};
-use mres_build::bake::bake_file_with_progress;
+use mres_build::bake::bake_file;
 use mres_build::settings::BakeSettings;
 use mres_format::MresFile;
 use mres_import::referenced_files;
@@ -175,8 +175,7 @@ impl Batch<'_> {
                     Lookup::Miss => {}
                 }
             }
-            let baked = bake_file_with_progress(input, &settings, &|line| (self.stage)(input, line))
-                .map_err(|e| e.to_string())?;
+            let baked = bake_file(input, &settings, &|line| (self.stage)(input, line)).map_err(|e| e.to_string())?;
             report.shards = Some(baked.stats.build.shards);
             dropped = Some(baked.stats.degenerate_dropped);
             if let (Some(cache), Some(key)) = (self.cache, &key) {

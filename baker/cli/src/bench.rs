@@ -3,7 +3,7 @@
 //! builder. This module holds what one child does.
 
 use meshopt::clusterlod::{clod_build, clod_default_config, ClodMesh};
-use mres_build::bake::bake_mesh;
+use mres_build::bake::bake;
 use mres_build::settings::BakeSettings;
 use mres_format::{select, MresFile};
 use mres_import::SourceMesh;
@@ -67,7 +67,7 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
     let input_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
     let diag = diagonal(&mesh);
     let start = Instant::now();
-    let baked = bake_mesh(mesh, settings)?;
+    let baked = bake(mesh, settings, &|_| {})?;
     let seconds = start.elapsed().as_secs_f64();
     let dag_seconds =
         baked.stats.build.stage_seconds.iter().filter(|(s, _)| s != "write" && s != "encode").map(|(_, t)| t).sum();

@@ -2,7 +2,7 @@
 //! validator — crack-free cuts at every uniform threshold and at random cameras, monotone
 //! errors, nested spheres, intact pages — with one root.
 
-use mres_build::bake::{bake_file, bake_mesh};
+use mres_build::bake::{bake as bake_source, bake_file};
 use mres_build::BakeSettings;
 use mres_check::validate::{validate, Report, ValidateOptions};
 use mres_cli::generate;
@@ -20,7 +20,7 @@ fn check(bytes: Vec<u8>, random_cuts: usize) -> (MresFile, Report) {
 }
 
 fn bake(mesh: SourceMesh) -> Vec<u8> {
-    bake_mesh(mesh, &BakeSettings::default()).expect("bake").bytes
+    bake_source(mesh, &BakeSettings::default(), &|_| {}).expect("bake").bytes
 }
 
 #[test]
@@ -128,7 +128,7 @@ fn write_two_primitive_gltf(dir: &Path) -> PathBuf {
 fn gltf_with_two_primitives_and_node_transforms() {
     let dir = tempfile::tempdir().unwrap();
     let path = write_two_primitive_gltf(dir.path());
-    let baked = bake_file(&path, &BakeSettings::default()).expect("bake glTF");
+    let baked = bake_file(&path, &BakeSettings::default(), &|_| {}).expect("bake glTF");
     assert_eq!(baked.stats.source_triangles, 2 * (768 + 512));
     let (file, _) = check(baked.bytes, 200);
     // Instances at x = +10 (scaled 2: sphere radius 2, terrain 0..2) and x = -10.
@@ -152,7 +152,7 @@ fn real_meshes_validate() {
         ("scans/demosthenes_photoscan.obj", false),
         ("models/flight_helmet.glb", false),
     ] {
-        let baked = bake_file(&asset(rel), &BakeSettings::default()).unwrap_or_else(|e| panic!("{rel}: {e}"));
+        let baked = bake_file(&asset(rel), &BakeSettings::default(), &|_| {}).unwrap_or_else(|e| panic!("{rel}: {e}"));
         let (_, report) = check(baked.bytes, 200);
         if closed {
             assert_eq!(report.root_clusters, 1, "{rel}");
@@ -166,7 +166,7 @@ fn output_is_identical_for_any_thread_count() {
     let path = asset("models/flight_helmet.glb");
     let bake_with = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| bake_file(&path, &BakeSettings::default()).unwrap().bytes)
+        pool.install(|| bake_file(&path, &BakeSettings::default(), &|_| {}).unwrap().bytes)
     };
     let one = bake_with(1);
     assert_eq!(one, bake_with(2));

@@ -2,7 +2,7 @@
 //! borders simplified above the shards, deterministic for any thread count, and the same
 //! bytes whether the OBJ is streamed from the file or imported whole.
 
-use mres_build::bake::{bake_file, bake_mesh};
+use mres_build::bake::{bake as bake_source, bake_file};
 use mres_build::BakeSettings;
 use mres_check::validate::{validate, Report, ValidateOptions};
 use mres_cli::generate;
@@ -22,7 +22,7 @@ fn check(bytes: Vec<u8>) -> (MresFile, Report) {
 }
 
 fn bake(mesh: SourceMesh, settings: &BakeSettings) -> (Vec<u8>, u64) {
-    let baked = bake_mesh(mesh, settings).expect("bake");
+    let baked = bake_source(mesh, settings, &|_| {}).expect("bake");
     (baked.bytes, baked.stats.build.shards)
 }
 
@@ -82,7 +82,7 @@ fn sharded_output_is_identical_for_any_thread_count_and_streamed_or_whole() {
     let bake_with = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         // The file is large enough for the streaming reader at this shard size.
-        pool.install(|| bake_file(&path, &settings).unwrap())
+        pool.install(|| bake_file(&path, &settings, &|_| {}).unwrap())
     };
     let one = bake_with(1);
     assert!(one.stats.build.shards > 1);

@@ -1,0 +1,42 @@
+//! A mesh of at most `shard_triangles` triangles is built whole: welded on a grid over its
+//! bounds, cut into level-0 clusters, and built level by level to the root.
+
+use crate::dag::{BuildStats, BuiltDag, Collected, DagOutput, Frame, StageClock};
+use crate::error::BakeError;
+use crate::levels::{level0, Builder};
+use crate::progress::Progress;
+use crate::settings::BakeSettings;
+use crate::weld::weld;
+use mres_import::SourceMesh;
+
+/// Builds the DAG of `mesh` (consumed, so that its memory is freed once welded) into `output`.
+pub fn build_whole<O: DagOutput>(
+    mesh: SourceMesh,
+    settings: &BakeSettings,
+    progress: Progress,
+    output: O,
+) -> Result<BuiltDag<O>, BakeError> {
+    let mut stats = BuildStats::default();
+    let mut clock = StageClock::start();
+    progress(&format!("weld: {} triangles", mesh.triangle_count()));
+    let welded = weld(&mesh, settings);
+    let source_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
+    drop(mesh);
+    let welded = match welded {
+        Some(w) if !w.indices.is_empty() => w,
+        _ => return Err(BakeError::Empty(source_triangles)),
+    };
+    clock.lap(&mut stats, "weld");
+    let mut builder = Builder::new(&welded, settings, level0(&welded, settings), 0);
+    clock.lap(&mut stats, "level 0");
+    progress(&format!("level 0: {} clusters", builder.clusters.len()));
+    builder.to_root(progress);
+    clock.lap(&mut stats, "levels");
+    let mut dag = Collected::new(output);
+    let cell = builder.finish(&dag.output)?;
+    dag.collect(vec![cell], &mut stats);
+    dag.welded_vertices = welded.positions.len() as u64;
+    dag.degenerate = welded.degenerate_dropped;
+    clock.lap(&mut stats, "encode");
+    Ok(dag.finish(Frame::of(&welded), welded.source_triangles, source_triangles, stats))
+}
