@@ -521,9 +521,12 @@ fn glb_with_binary_chunk() {
 // ---------------------------------------------------------------------------------------
 // Good PLY inputs
 
+/// Position, normal and UV of a triangle corner.
+type CornerAttributes = ([f32; 3], [f32; 3], [f32; 2]);
+
 /// Each triangle's corners as (position, normal, UV), for comparing meshes whose vertices are
 /// numbered differently (tobj numbers them in order of first use).
-fn corners(mesh: &SourceMesh) -> Vec<[([f32; 3], [f32; 3], [f32; 2]); 3]> {
+fn corners(mesh: &SourceMesh) -> Vec<[CornerAttributes; 3]> {
     let corner = |i: u32| {
         let i = i as usize;
         let normal = mesh.normals.as_ref().map_or([9.0; 3], |n| n[i]);

@@ -192,7 +192,7 @@ impl Values for Ascii<'_> {
                 self.line += 1;
                 return Err("the file ends here (fewer entries than the header declares; truncated?)".into());
             };
-            if !line.iter().all(|b| is_separator(b)) {
+            if !line.iter().all(is_separator) {
                 self.words = line.split(is_separator as fn(&u8) -> bool);
                 return Ok(());
             }
@@ -245,7 +245,7 @@ impl Values for Ascii<'_> {
 
     fn finish(&mut self) -> ReadResult<()> {
         while let Some(line) = self.next_line() {
-            if !line.iter().all(|b| is_separator(b)) {
+            if !line.iter().all(is_separator) {
                 return Err("data after the last element".into());
             }
         }
