@@ -2,7 +2,8 @@
 //! `import_file` (limits: 1 MiB, 2^20 triangles); `referenced_files` runs on it too.
 //! Differential: whenever the whole-file (tobj) import succeeds, the streaming reader
 //! (`obj_stream`, used for large files) must succeed too and yield the same triangles that are
-//! not degenerate (three distinct positions).
+//! not degenerate (three distinct positions). Every syntax, index or position error names its
+//! line.
 #![no_main]
 
 #[path = "tempfile.rs"]
@@ -13,7 +14,7 @@ use std::sync::OnceLock;
 
 use libfuzzer_sys::fuzz_target;
 use mres_import::obj_stream::ObjVertices;
-use mres_import::{import_file, referenced_files, ImportLimits};
+use mres_import::{import_file, referenced_files, ImportErrorKind, ImportLimits};
 
 const LIMITS: ImportLimits = ImportLimits { max_file_bytes: 1 << 20, max_triangles: 1 << 20 };
 
@@ -32,6 +33,13 @@ fuzz_target!(|data: &[u8]| {
     let whole = import_file(path, &LIMITS);
     let _ = referenced_files(path);
     let streamed = ObjVertices::read(path, &LIMITS);
+    for err in [whole.as_ref().err(), streamed.as_ref().err()].into_iter().flatten() {
+        let located = matches!(
+            err.kind,
+            ImportErrorKind::Parse(_) | ImportErrorKind::IndexOutOfRange { .. } | ImportErrorKind::NonFinitePosition(_)
+        );
+        assert!(!located || err.to_string().contains("line "), "no line number: {err}");
+    }
     if let Ok(mesh) = whole {
         let v = streamed.expect("the streaming reader accepts what the whole-file importer accepts");
         let mut triangles = Vec::new();

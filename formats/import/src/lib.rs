@@ -1,11 +1,11 @@
-//! Importers: Wavefront OBJ (via `tobj`) and glTF 2.0 / GLB (via `gltf`) into one
-//! [`SourceMesh`].
+//! Importers: Wavefront OBJ (via `tobj`), glTF 2.0 / GLB (via `gltf`) and PLY (ASCII and
+//! binary) into one [`SourceMesh`].
 //!
 //! Every importer treats its input as hostile: sizes are checked against [`ImportLimits`]
 //! before anything proportional to them is allocated, every index and byte range is checked
 //! before use, and every failure is an [`ImportError`] naming the file — never a panic.
 //!
-//! # Choices shared by both formats
+//! # Choices shared by all formats
 //! - Degenerate triangles (two equal indices, or two exactly equal positions) are dropped and
 //!   counted in [`SourceMesh::degenerate_dropped`]; a file left with no triangles is an error
 //!   ([`ImportErrorKind::NoTriangles`]). Vertices are not welded or compacted.
@@ -23,8 +23,11 @@
 //! - Material index = position of the `usemtl` name in order of first use in the file;
 //!   faces before any `usemtl` get one past the last name (0 if there is none). `.mtl`
 //!   files are never parsed, so a missing or broken library is not an error.
-//! - Face indices (0, past the end, relative before the start) and NaN/infinite `v` lines
-//!   are errors reported with their line number. The file must be UTF-8 (a BOM is allowed).
+//! - Every parse error names its line: face indices (0, past the end, relative before the
+//!   start, or positive past the vertices read where `tobj` resolves them: at the next `o`/`g`,
+//!   material change or the end of the file), malformed or NaN/infinite `v`/`vt`/`vn` lines
+//!   (after dividing by `w`), faces without vertices, `usemtl` without a name, bytes that are
+//!   not UTF-8 (a BOM is allowed). Vertex colours are ignored.
 //!
 //! # glTF 2.0 and GLB
 //! - The default scene is imported (else scene 0; with no scenes, every mesh once,
@@ -42,6 +45,18 @@
 //!   and `file:` URIs are refused. Only buffers of imported primitives are loaded; images
 //!   are never read. A required extension (`extensionsRequired`: Draco, meshopt,
 //!   quantization) is an error.
+//!
+//! # PLY
+//! - ASCII, binary little endian and binary big endian; read by hand (the module `ply` says
+//!   why no crate is used). `element vertex` gives positions (`x y z`, any scalar type),
+//!   normals (`nx ny nz`) and UVs (`s t`, `u v` or `texture_u texture_v`); `element face`
+//!   gives polygons (`vertex_indices` or `vertex_index`, any integer types), triangulated as
+//!   fans around their first index. Faces with fewer than three indices are skipped; other
+//!   properties and elements are skipped by their size.
+//! - All triangles get material 0 (PLY has no materials).
+//! - Declared element counts must fit in the file, indices must be below the vertex count,
+//!   positions must be finite as `f32`, and nothing may follow the last element; errors name
+//!   the line (header, ASCII body) or byte offset (binary body) and the element entry.
 
 #![deny(missing_docs)]
 
@@ -51,6 +66,7 @@ mod obj;
 pub mod obj_stream;
 mod obj_syntax;
 pub mod obj_write;
+mod ply;
 
 pub use mesh::SourceMesh;
 
@@ -58,7 +74,7 @@ use std::fs::File;
 use std::io::Read;
 use std::path::{Component, Path, PathBuf};
 
-/// Which importer a path goes to, by extension (case-insensitive): `obj`, `gltf`, `glb`.
+/// Which importer a path goes to, by extension (case-insensitive): `obj`, `gltf`, `glb`, `ply`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum InputKind {
     /// Wavefront OBJ (`.obj`), with optional `.mtl` material libraries.
@@ -67,6 +83,8 @@ pub enum InputKind {
     Gltf,
     /// Binary glTF 2.0 (`.glb`).
     Glb,
+    /// PLY (`.ply`), ASCII or binary.
+    Ply,
 }
 
 impl InputKind {
@@ -79,6 +97,8 @@ impl InputKind {
             Some(InputKind::Gltf)
         } else if ext.eq_ignore_ascii_case("glb") {
             Some(InputKind::Glb)
+        } else if ext.eq_ignore_ascii_case("ply") {
+            Some(InputKind::Ply)
         } else {
             None
         }
@@ -129,13 +149,13 @@ pub enum ImportErrorKind {
     /// The file could not be opened or read.
     #[error("cannot read file: {0}")]
     Io(std::io::Error),
-    /// The extension is not one of `obj`, `gltf`, `glb` (see [`InputKind::from_path`]).
-    #[error("unsupported file extension (expected .obj, .gltf or .glb)")]
+    /// The extension is not one of `obj`, `gltf`, `glb`, `ply` (see [`InputKind::from_path`]).
+    #[error("unsupported file extension (expected .obj, .gltf, .glb or .ply)")]
     UnsupportedExtension,
     /// The file has zero bytes.
     #[error("file is empty")]
     EmptyFile,
-    /// The file is not valid OBJ / glTF / GLB (syntax, truncation, failed validation).
+    /// The file is not valid OBJ / glTF / GLB / PLY (syntax, truncation, failed validation).
     #[error("parse error: {0}")]
     Parse(String),
     /// An index refers past the end of what it indexes (or is 0 in a 1-based OBJ index).
@@ -207,7 +227,7 @@ pub enum ImportErrorKind {
 /// Result of the format-specific code, which does not know the path to report.
 type KindResult<T> = Result<T, ImportErrorKind>;
 
-/// Imports one mesh file (OBJ, glTF or GLB, chosen by [`InputKind::from_path`]) into a
+/// Imports one mesh file (OBJ, glTF, GLB or PLY, chosen by [`InputKind::from_path`]) into a
 /// [`SourceMesh`] that satisfies the invariants documented on that type.
 ///
 /// The [module documentation](self) says how each format's attributes, materials and
@@ -230,6 +250,7 @@ fn import_bytes(path: &Path, kind: InputKind, bytes: Vec<u8>, limits: &ImportLim
     match kind {
         InputKind::Obj => obj::import(bytes, limits),
         InputKind::Gltf | InputKind::Glb => gltf::import(path, &bytes, kind, limits),
+        InputKind::Ply => ply::import(&bytes, limits),
     }
 }
 
@@ -241,6 +262,7 @@ fn import_bytes(path: &Path, kind: InputKind, bytes: Vec<u8>, limits: &ImportLim
 ///   because a change to it may be meant to change the bake.
 /// - glTF / GLB: the external buffer files used by the meshes. Images are never read and
 ///   never listed; `data:` URIs and the GLB binary chunk are part of `path`.
+/// - PLY: none (its header is checked).
 ///
 /// Errors like [`import_file`] with default limits (unreadable file, bad syntax, buffer URIs
 /// outside the asset directory).
@@ -258,6 +280,7 @@ fn referenced_kind(path: &Path) -> KindResult<Vec<PathBuf>> {
     match kind {
         InputKind::Obj => obj::referenced_files(path, &bytes),
         InputKind::Gltf | InputKind::Glb => gltf::referenced_files(path, &bytes, kind),
+        InputKind::Ply => ply::referenced_files(&bytes),
     }
 }
 
@@ -430,6 +453,7 @@ mod tests {
         assert_eq!(InputKind::from_path(Path::new("a/b.OBJ")), Some(InputKind::Obj));
         assert_eq!(InputKind::from_path(Path::new("b.glTF")), Some(InputKind::Gltf));
         assert_eq!(InputKind::from_path(Path::new("b.Glb")), Some(InputKind::Glb));
+        assert_eq!(InputKind::from_path(Path::new("b.Ply")), Some(InputKind::Ply));
         assert_eq!(InputKind::from_path(Path::new("b.stl")), None);
         assert_eq!(InputKind::from_path(Path::new("obj")), None);
     }
@@ -485,15 +509,53 @@ mod tests {
         let limits = ImportLimits::default();
         assert!(import_bytes(&path, kind, valid.to_vec(), &limits).is_ok());
         for length in 0..valid.len() {
-            let _ = import_bytes(&path, kind, valid[..length].to_vec(), &limits);
+            check_located(kind, import_bytes(&path, kind, valid[..length].to_vec(), &limits));
         }
         for position in 0..valid.len() {
             for mask in [0x01, 0x02, 0x10, 0x20, 0x80, 0xff] {
                 let mut bytes = valid.to_vec();
                 bytes[position] ^= mask;
-                let _ = import_bytes(&path, kind, bytes, &limits);
+                check_located(kind, import_bytes(&path, kind, bytes, &limits));
             }
         }
+    }
+
+    /// OBJ and PLY syntax, index and position errors must say where (line or byte offset).
+    fn check_located(kind: InputKind, result: KindResult<SourceMesh>) {
+        let Err(err) = result else { return };
+        let located = matches!(
+            err,
+            ImportErrorKind::Parse(_) | ImportErrorKind::IndexOutOfRange { .. } | ImportErrorKind::NonFinitePosition(_)
+        );
+        if located && matches!(kind, InputKind::Obj | InputKind::Ply) {
+            let message = err.to_string();
+            assert!(message.contains("line ") || message.contains("byte "), "no location: {message}");
+        }
+    }
+
+    #[test]
+    fn fuzz_ply() {
+        fuzz("cube_ascii.ply", include_bytes!("../tests/data/cube_ascii.ply"));
+        fuzz("faces_first_pentagon.ply", include_bytes!("../tests/data/faces_first_pentagon.ply"));
+        for (name, bytes) in [
+            ("cube_binary_le.ply", &include_bytes!("../tests/data/cube_binary_le.ply")[..]),
+            ("cube_binary_be.ply", &include_bytes!("../tests/data/cube_binary_be.ply")[..]),
+        ] {
+            fuzz(name, bytes);
+            // Every byte of a binary PLY belongs to the header or an element: each
+            // truncation is an error.
+            for length in 0..bytes.len() {
+                let result =
+                    import_bytes(Path::new(name), InputKind::Ply, bytes[..length].to_vec(), &Default::default());
+                assert!(result.is_err(), "{name} cut to {length} bytes imported");
+            }
+        }
+    }
+
+    #[test]
+    fn fuzz_obj_new_paths() {
+        fuzz("cube.obj", include_bytes!("../tests/data/cube.obj"));
+        fuzz("partial_vertex_colours.obj", include_bytes!("../tests/data/partial_vertex_colours.obj"));
     }
 
     #[test]

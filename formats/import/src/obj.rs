@@ -1,16 +1,24 @@
 //! Wavefront OBJ importer: a validating scan of the text, then `tobj` for the parse.
 //!
-//! `tobj` 4 trusts its input in ways that matter here, so [`scan`] runs first over the same
-//! lines, tokenised the same way, and:
+//! `tobj` 4 trusts its input in ways that matter here, and its errors carry no line number,
+//! so [`scan`] runs first over the same lines, tokenised the same way, with the grammar of
+//! `obj_syntax` (shared with the streaming reader), and:
+//! - rejects, with its line number, every line `tobj` would fail on: malformed `v`/`vt`/`vn`
+//!   lines, `w = 0`, faces without vertices, bad face vertices, `usemtl` without a name;
 //! - checks every face index (0, or past the end, or a relative index reaching before the
-//!   first element) — `tobj` does `index * 2 + 1` on texture/normal indices without overflow
-//!   checks, which panics in debug builds — and reports it with its line number;
-//! - reports NaN/infinite `v` coordinates with their line number;
+//!   first element, or a positive one past what `tobj` has read where it resolves it) —
+//!   `tobj` does `index * 2 + 1` on texture/normal indices without overflow checks, which
+//!   panics in debug builds;
+//! - reports NaN/infinite positions (after dividing by `w`) with their line number;
 //! - counts triangles against [`ImportLimits::max_triangles`] before `tobj` allocates;
 //! - collects `usemtl` names in order of first use, which become the material indices;
 //! - blanks (turns into ignored lines) `l` polylines, which `tobj` would otherwise turn into
 //!   triangles, and `mtllib` lines, so that `tobj` never parses a `.mtl` file (its MTL parser
-//!   unwraps on malformed colour lines, and we only need material names).
+//!   unwraps on malformed colour lines, and we only need material names);
+//! - blanks vertex colours (`v x y z r g b`), which we do not use and which make `tobj` fail
+//!   when only some vertices have them.
+//!
+//! So `tobj` should never fail; if it does, the error says that its line is unknown.
 //!
 //! `tobj` then parses with `single_index` (positions, normals and UVs share one index, so a
 //! vertex is split wherever its UV or normal differs: seams stay correct) and `triangulate`
@@ -19,7 +27,7 @@
 use std::io::{BufRead, Cursor, Read};
 use std::path::{Path, PathBuf};
 
-use super::obj_syntax::{out_of_range, record_material};
+use super::obj_syntax::{face, numbers, parse_error, position, record_material, usemtl_name, ForwardRefs};
 use super::{
     asset_dir, check_triangle_count, check_vertex_count, resolve_inside, ImportErrorKind, ImportLimits, KindResult,
     MeshBuilder,
@@ -35,6 +43,8 @@ struct Scan {
     triangles: u64,
     /// Byte offsets of keywords to overwrite with `#` (`l`, `mtllib`): tobj ignores them then.
     blank: Vec<usize>,
+    /// Byte ranges to overwrite with spaces (vertex colours).
+    erase: Vec<std::ops::Range<usize>>,
 }
 
 /// The UTF-8 byte order mark some editors put at the start of a text file.
@@ -51,6 +61,9 @@ pub(super) fn import(mut bytes: Vec<u8>, limits: &ImportLimits) -> KindResult<So
     for &offset in &scan.blank {
         bytes[offset] = b'#';
     }
+    for range in &scan.erase {
+        bytes[range.clone()].fill(b' ');
+    }
 
     // Every usemtl name resolves to its first-use index through one synthetic material
     // library, announced by a synthetic first line (the real `mtllib` lines are blanked).
@@ -62,8 +75,9 @@ pub(super) fn import(mut bytes: Vec<u8>, limits: &ImportLimits) -> KindResult<So
     };
     let options = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     let mut reader = Cursor::new(&b"mtllib mres-usemtl-names\n"[..]).chain(Cursor::new(&bytes));
-    let (models, _) =
-        tobj::load_obj_buf(&mut reader, &options, load_materials).map_err(|e| ImportErrorKind::Parse(e.to_string()))?;
+    let (models, _) = tobj::load_obj_buf(&mut reader, &options, load_materials).map_err(|e| {
+        ImportErrorKind::Parse(format!("{e} (reported by tobj; line unknown: the validating scan missed it)"))
+    })?;
 
     convert(&models, scan.material_names.len(), scan.triangles, limits)
 }
@@ -123,8 +137,13 @@ fn convert(
 
 /// The file as text; OBJ files are ASCII in practice, and `tobj` needs UTF-8.
 fn text(bytes: &[u8]) -> KindResult<&str> {
-    std::str::from_utf8(bytes)
-        .map_err(|e| ImportErrorKind::Parse(format!("not UTF-8 text (at byte {})", e.valid_up_to())))
+    std::str::from_utf8(bytes).map_err(|e| {
+        // The same message as the streaming reader's.
+        let before = &bytes[..e.valid_up_to()];
+        let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
+        let column = before.len() - before.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        parse_error(line, &format!("not UTF-8 text (at byte {column} of the line)"))
+    })
 }
 
 /// Lines of `text` as `tobj` sees them (split at `\n`), with their 1-based numbers and byte
@@ -144,10 +163,7 @@ fn lines(text: &str) -> impl Iterator<Item = (usize, usize, &str)> {
 fn scan(text: &str) -> KindResult<Scan> {
     let mut scan = Scan::default();
     let mut counts = [0u64; 3];
-    // Largest positive index per slot and its line, checked against the final counts
-    // (tobj resolves positive indices against the whole file).
-    let mut max_positive: [(u64, usize); 3] = [(0, 0); 3];
-
+    let mut refs = ForwardRefs::default();
     for (line_no, start, line) in lines(text) {
         let mut words = line.split_whitespace();
         let Some(keyword) = words.next() else {
@@ -157,40 +173,40 @@ fn scan(text: &str) -> KindResult<Scan> {
         match keyword {
             "v" => {
                 counts[0] += 1;
-                check_finite_vertex(words, line_no)?;
-            }
-            "vt" => counts[1] += 1,
-            "vn" => counts[2] += 1,
-            "l" | "mtllib" => scan.blank.push(keyword_offset),
-            "usemtl" => record_material(&mut scan.material_names, line, line_no)?,
-            "f" => {
-                let mut corners = 0u64;
-                for vertex in words {
-                    // Resolved as tobj will: relative indices against the counts so far.
-                    super::obj_syntax::corner(vertex, line_no, &counts, Some(&mut max_positive))?;
-                    corners += 1;
+                position(words.clone(), line_no)?;
+                // `position` allows 0, 1 (w) or 3 (a colour) values after x y z.
+                let mut extra = words.skip(3);
+                if let (Some(red), Some(_), Some(_)) = (extra.next(), extra.next(), extra.next()) {
+                    // Offset of the first colour value: the words are slices of `line`.
+                    let from = start + (red.as_ptr() as usize - line.as_ptr() as usize);
+                    scan.erase.push(from..start + line.trim_end().len());
                 }
+            }
+            "vt" => {
+                counts[1] += 1;
+                numbers::<2>(&mut words, line_no, "vt")?;
+            }
+            "vn" => {
+                counts[2] += 1;
+                numbers::<3>(&mut words, line_no, "vn")?;
+            }
+            "l" | "mtllib" => scan.blank.push(keyword_offset),
+            "o" | "g" => refs.object(&counts)?,
+            "usemtl" => {
+                record_material(&mut scan.material_names, line, line_no)?;
+                refs.material(usemtl_name(line), &counts)?;
+            }
+            "f" => {
+                // Resolved as tobj will: relative indices against the counts so far.
+                let mut corners = 0u64;
+                face(words, line_no, &counts, Some(&mut refs), |_| corners += 1)?;
                 scan.triangles += corners.saturating_sub(2);
             }
             _ => {}
         }
     }
-    for (slot, &(index, line_no)) in max_positive.iter().enumerate() {
-        if index > counts[slot] {
-            return Err(out_of_range(line_no, slot, index as i64, counts[slot]));
-        }
-    }
+    refs.end(&counts)?;
     Ok(scan)
-}
-
-/// Reports a `v` line whose coordinates parse but are NaN or infinite.
-fn check_finite_vertex(words: std::str::SplitWhitespace<'_>, line_no: usize) -> KindResult<()> {
-    let coordinates: Vec<f32> = words.take(3).filter_map(|w| w.parse().ok()).collect();
-    // Unparsable coordinates are left to tobj, which reports them.
-    if coordinates.iter().any(|c| !c.is_finite()) {
-        return Err(ImportErrorKind::NonFinitePosition(format!("line {line_no}: v {coordinates:?}")));
-    }
-    Ok(())
 }
 
 /// The `mtllib` files of an OBJ that exist inside its directory, in order of first mention.

@@ -18,7 +18,7 @@ use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
-use super::obj_syntax::{corner, out_of_range, parse_error, record_material, usemtl_name};
+use super::obj_syntax::{face, numbers, parse_error, position, record_material, usemtl_name, ForwardRefs};
 use super::{
     check_triangle_count, check_vertex_count, unit_or_zero, ImportError, ImportErrorKind, ImportLimits, KindResult,
 };
@@ -52,7 +52,7 @@ impl ObjVertices {
     fn read_kind(path: &Path, limits: &ImportLimits) -> KindResult<ObjVertices> {
         let mut out = ObjVertices { all_uvs: true, all_normals: true, ..Default::default() };
         let mut counts = [0u64; 3];
-        let mut max_positive: [(u64, usize); 3] = [(0, 0); 3];
+        let mut refs = ForwardRefs::default();
         let mut any_line = false;
         for_each_line(path, |line_no, line| {
             any_line = true;
@@ -61,9 +61,6 @@ impl ObjVertices {
             match keyword {
                 "v" => {
                     let p = position(words, line_no)?;
-                    if !p.iter().all(|x| x.is_finite()) {
-                        return Err(ImportErrorKind::NonFinitePosition(format!("line {line_no}: v {p:?}")));
-                    }
                     check_vertex_count(counts[0] + 1, limits)?;
                     out.positions.push(p);
                     counts[0] += 1;
@@ -78,15 +75,18 @@ impl ObjVertices {
                     out.normals.push(unit_or_zero(c));
                     counts[2] += 1;
                 }
-                "usemtl" => record_material(&mut out.material_names, line, line_no)?,
+                "o" | "g" => refs.object(&counts)?,
+                "usemtl" => {
+                    record_material(&mut out.material_names, line, line_no)?;
+                    refs.material(usemtl_name(line), &counts)?;
+                }
                 "f" => {
                     let mut corners = 0u64;
-                    for vertex in words {
-                        let c = corner(vertex, line_no, &counts, Some(&mut max_positive))?;
+                    face(words, line_no, &counts, Some(&mut refs), |c| {
                         out.all_uvs &= c.vt != NONE;
                         out.all_normals &= c.vn != NONE;
                         corners += 1;
-                    }
+                    })?;
                     out.triangles += corners.saturating_sub(2);
                     check_triangle_count(out.triangles, limits)?;
                 }
@@ -97,11 +97,7 @@ impl ObjVertices {
         if !any_line {
             return Err(ImportErrorKind::EmptyFile);
         }
-        for (slot, &(index, line_no)) in max_positive.iter().enumerate() {
-            if index > counts[slot] {
-                return Err(out_of_range(line_no, slot, index as i64, counts[slot]));
-            }
-        }
+        refs.end(&counts)?;
         if out.triangles == 0 {
             return Err(ImportErrorKind::NoTriangles { degenerate_dropped: 0 });
         }
@@ -124,7 +120,7 @@ impl ObjVertices {
         let unnamed = self.material_names.len() as u32;
         let mut material = unnamed;
         let mut counts = [0u64; 3];
-        let mut face: Vec<Corner> = Vec::new();
+        let mut corners: Vec<Corner> = Vec::new();
         let result = for_each_line(path, |line_no, line| {
             let mut words = line.split_whitespace();
             match words.next() {
@@ -136,19 +132,18 @@ impl ObjVertices {
                     material = self.material_names.iter().position(|n| n == name).map_or(unnamed, |m| m as u32);
                 }
                 Some("f") => {
-                    face.clear();
-                    for vertex in words {
-                        let mut c = corner(vertex, line_no, &counts, None)?;
+                    corners.clear();
+                    face(words, line_no, &counts, None, |mut c| {
                         if !self.all_uvs {
                             c.vt = NONE;
                         }
                         if !self.all_normals {
                             c.vn = NONE;
                         }
-                        face.push(c);
-                    }
-                    for k in 2..face.len() {
-                        f([face[0], face[k - 1], face[k]], material);
+                        corners.push(c);
+                    })?;
+                    for k in 2..corners.len() {
+                        f([corners[0], corners[k - 1], corners[k]], material);
                     }
                 }
                 _ => {}
@@ -177,39 +172,6 @@ fn for_each_line(path: &Path, mut f: impl FnMut(usize, &str) -> KindResult<()>) 
             line = line.trim_start_matches('\u{feff}');
         }
         f(line_no, line)?;
-    }
-}
-
-/// The first `N` numbers after a keyword (more are ignored, as tobj does).
-fn numbers<'a, const N: usize>(
-    words: &mut impl Iterator<Item = &'a str>,
-    line_no: usize,
-    keyword: &str,
-) -> KindResult<[f32; N]> {
-    let mut out = [0.0f32; N];
-    for x in out.iter_mut() {
-        let w =
-            words.next().ok_or_else(|| parse_error(line_no, &format!("{keyword} line with fewer than {N} numbers")))?;
-        *x = w.parse().map_err(|_| parse_error(line_no, &format!("bad number {w:?} in a {keyword} line")))?;
-    }
-    Ok(out)
-}
-
-/// A `v` line after its keyword, read as tobj reads it: `x y z`, then nothing, `w` (which
-/// divides the coordinates; 0 is an error) or three colour values (ignored).
-fn position(mut words: std::str::SplitWhitespace<'_>, line_no: usize) -> KindResult<[f32; 3]> {
-    let p = numbers::<3>(&mut words, line_no, "v")?;
-    match (words.next(), words.next(), words.next(), words.next()) {
-        (None, ..) => Ok(p),
-        (Some(w), None, ..) => {
-            let w: f32 = w.parse().map_err(|_| parse_error(line_no, &format!("bad w {w:?} in a v line")))?;
-            if w == 0.0 {
-                return Err(parse_error(line_no, "v line with w = 0"));
-            }
-            Ok(p.map(|c| c / w))
-        }
-        (Some(_), Some(_), Some(_), None) => Ok(p), // a vertex colour
-        _ => Err(parse_error(line_no, "v line with 2 or more than 3 values after x y z")),
     }
 }
 

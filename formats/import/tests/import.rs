@@ -2,10 +2,11 @@
 //! its expected error, naming the file, without panicking), good inputs in
 //! `formats/import/tests/data/` and generated ones (external buffers), and the real meshes in
 //! `../shared/meshes/` (skipped when absent). The truncation / byte-flip fuzz tests are unit
-//! tests in `src/import/mod.rs`: they import from memory, which is fast.
+//! tests in `src/lib.rs`: they import from memory, which is fast.
 
 use std::path::{Path, PathBuf};
 
+use mres_import::obj_stream::ObjVertices;
 use mres_import::SourceMesh;
 use mres_import::{import_file, referenced_files, ImportError, ImportErrorKind, ImportLimits};
 
@@ -93,6 +94,41 @@ const BAD_INPUTS: &[(&str, KindCheck)] = &[
     ("lines_only.obj", |k| matches!(k, ImportErrorKind::NoTriangles { .. })),
     ("not_utf8.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
     ("bad_face_token.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("bad_vertex_value.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("bad_texcoord.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("bad_normal.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("w_zero.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("w_overflow.obj", |k| matches!(k, ImportErrorKind::NonFinitePosition(_))),
+    ("face_without_vertices.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("bad_face_vertex_slots.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("face_vertex_without_position.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("usemtl_without_name.obj", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("forward_reference_across_objects.obj", |k| {
+        matches!(k, ImportErrorKind::IndexOutOfRange { index: 3, count: 2, .. })
+    }),
+    ("empty.ply", |k| matches!(k, ImportErrorKind::EmptyFile)),
+    ("not_ply.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("no_end_header.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("unknown_format.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("truncated_binary.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("vertex_count_beyond_file.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("face_index_out_of_range.ply", |k| matches!(k, ImportErrorKind::IndexOutOfRange { index: 3, count: 3, .. })),
+    ("negative_face_index.ply", |k| matches!(k, ImportErrorKind::IndexOutOfRange { index: -1, count: 3, .. })),
+    ("nan_position.ply", |k| matches!(k, ImportErrorKind::NonFinitePosition(_))),
+    ("double_overflows_float.ply", |k| matches!(k, ImportErrorKind::NonFinitePosition(_))),
+    ("missing_z.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("float_face_indices.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("float_list_count.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("duplicate_property.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("duplicate_element.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("negative_list_count.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("huge_face_list.ply", |k| matches!(k, ImportErrorKind::TooLarge(_))),
+    ("trailing_data.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("ascii_extra_value.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("ascii_bad_number.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("no_vertex_element.ply", |k| matches!(k, ImportErrorKind::Parse(_))),
+    ("point_cloud.ply", |k| matches!(k, ImportErrorKind::NoTriangles { degenerate_dropped: 0 })),
+    ("degenerate_only.ply", |k| matches!(k, ImportErrorKind::NoTriangles { degenerate_dropped: 2 })),
     ("empty.glb", |k| matches!(k, ImportErrorKind::EmptyFile)),
     ("truncated.glb", |k| matches!(k, ImportErrorKind::Parse(_))),
     ("glb_header_length_too_small.glb", |k| matches!(k, ImportErrorKind::Parse(_))),
@@ -128,6 +164,48 @@ const BAD_INPUTS: &[(&str, KindCheck)] = &[
     ("float_indices.gltf", |k| matches!(k, ImportErrorKind::InvalidAccessor { .. })),
 ];
 
+/// Where the error of each OBJ and PLY bad input must say the problem is (line or byte
+/// offset, with what follows it); every OBJ / PLY syntax, index or position error is listed.
+const LOCATIONS: &[(&str, &str)] = &[
+    ("truncated.obj", "line 5: v line with fewer than 3 numbers"),
+    ("nan_position.obj", "line 2: v [NaN, 0.0, 0.0]"),
+    ("inf_position.obj", "line 3: v [0.0, inf, 0.0]"),
+    ("index_out_of_range.obj", "line 4: vertex position index 4 is out of range (3 available)"),
+    ("negative_index_out_of_range.obj", "line 4: vertex position index -4"),
+    ("texcoord_index_zero.obj", "line 5: texture coordinate index 0"),
+    ("not_utf8.obj", "line 4: not UTF-8 text"),
+    ("bad_face_token.obj", "line 4: bad face vertex \"x\""),
+    ("bad_vertex_value.obj", "line 4: bad number \"x\" in a v line"),
+    ("bad_texcoord.obj", "line 4: vt line with fewer than 2 numbers"),
+    ("bad_normal.obj", "line 4: bad number \"one\" in a vn line"),
+    ("w_zero.obj", "line 4: v line with w = 0"),
+    ("w_overflow.obj", "line 2: v [inf, 0.0, 0.0]"),
+    ("face_without_vertices.obj", "line 4: face without vertices"),
+    ("bad_face_vertex_slots.obj", "line 6: bad face vertex \"3/1/1/1\""),
+    ("face_vertex_without_position.obj", "line 5: face vertex without a position index"),
+    ("usemtl_without_name.obj", "line 4: usemtl without a material name"),
+    ("forward_reference_across_objects.obj", "line 3: vertex position index 3 is out of range (2 available)"),
+    ("not_ply.ply", "line 1: not a PLY file"),
+    ("no_end_header.ply", "line 8: the file ends before end_header"),
+    ("unknown_format.ply", "line 2: unknown encoding \"binary_middle_endian\""),
+    ("truncated_binary.ply", "byte 210: face 0: the file ends here (4 bytes needed, 2 left; truncated?)"),
+    ("vertex_count_beyond_file.ply", "line 3: element vertex declares 1000000000 entries"),
+    ("face_index_out_of_range.ply", "byte 214: face 0: vertex index 3 is out of range (3 available)"),
+    ("negative_face_index.ply", "line 13: face 0: vertex index -1 is out of range"),
+    ("nan_position.ply", "byte 181: vertex 1: [NaN, 0.0, 0.0]"),
+    ("double_overflows_float.ply", "line 11: vertex 1: [inf, 0.0, 0.0]"),
+    ("missing_z.ply", "line 3: element vertex has no scalar property \"z\""),
+    ("float_face_indices.ply", "line 7: face property \"vertex_indices\" is not a list of integers"),
+    ("float_list_count.ply", "line 8: list \"vertex_indices\" has a floating-point count type"),
+    ("duplicate_property.ply", "line 7: element \"vertex\" has a second property \"y\""),
+    ("duplicate_element.ply", "line 9: second element named \"vertex\""),
+    ("negative_list_count.ply", "byte 204: face 0: negative list length -3"),
+    ("trailing_data.ply", "byte 218: 4 bytes after the last element"),
+    ("ascii_extra_value.ply", "line 11: vertex 1: more values than the header declares"),
+    ("ascii_bad_number.ply", "line 11: vertex 1: \"0,5\" is not a valid float value"),
+    ("no_vertex_element.ply", "line 5: the header declares no \"vertex\" element"),
+];
+
 #[test]
 fn every_bad_input_fails_with_its_error_and_names_the_file() {
     for (name, expected) in BAD_INPUTS {
@@ -142,6 +220,31 @@ fn every_bad_input_fails_with_its_error_and_names_the_file() {
         assert_eq!(err.path, path);
         assert!(expected(&err.kind), "{name}: unexpected error: {message}");
         println!("{name}: {}", err.kind);
+        let located = matches!(
+            err.kind,
+            ImportErrorKind::Parse(_) | ImportErrorKind::IndexOutOfRange { .. } | ImportErrorKind::NonFinitePosition(_)
+        );
+        let text_format = name.ends_with(".obj") || name.ends_with(".ply");
+        match LOCATIONS.iter().find(|(n, _)| n == name) {
+            Some((_, location)) => assert!(message.contains(location), "{name}: expected {location:?} in: {message}"),
+            None => assert!(!(located && text_format), "{name}: LOCATIONS has no entry for: {message}"),
+        }
+    }
+}
+
+/// The streaming OBJ reader (used for large files) rejects every bad OBJ with the same message.
+#[test]
+fn streaming_obj_reader_gives_the_same_errors() {
+    // Degenerate triangles are dropped by the whole-file importer only (pass 1 leaves them to
+    // its caller).
+    for (name, _) in BAD_INPUTS.iter().filter(|(n, _)| n.ends_with(".obj") && !n.starts_with("degenerate")) {
+        let path = bad_input(name);
+        let whole = import(&path).unwrap_err().to_string();
+        let streamed = match ObjVertices::read(&path, &ImportLimits::default()) {
+            Ok(v) => panic!("{name}: the streaming reader accepted it ({} triangles)", v.triangles),
+            Err(err) => err.to_string(),
+        };
+        assert_eq!(streamed, whole, "{name}");
     }
 }
 
@@ -266,6 +369,14 @@ fn obj_attribute_missing_on_some_faces_is_dropped() {
     assert!(mesh.uvs.is_none());
     let normals = mesh.normals.unwrap();
     assert!(normals.iter().all(|n| *n == [0.0, 0.0, 1.0]), "renormalised");
+}
+
+#[test]
+fn obj_vertex_colours_on_some_vertices_are_ignored() {
+    // tobj fails on colours that only some vertices have; the importer blanks them.
+    let mesh = import_ok(&data("partial_vertex_colours.obj"));
+    assert_eq!(mesh.triangle_count(), 2);
+    assert_eq!(mesh.positions[0], [0.0, 0.0, 0.0]);
 }
 
 #[test]
@@ -405,6 +516,72 @@ fn glb_with_binary_chunk() {
     assert_eq!(mesh.materials, vec![0], "no materials: index 0 = one past the last");
     assert!(mesh.normals.is_none() && mesh.uvs.is_none());
     assert!(referenced_files(&path).unwrap().is_empty());
+}
+
+// ---------------------------------------------------------------------------------------
+// Good PLY inputs
+
+/// Position, normal and UV of a triangle corner.
+type CornerAttributes = ([f32; 3], [f32; 3], [f32; 2]);
+
+/// Each triangle's corners as (position, normal, UV), for comparing meshes whose vertices are
+/// numbered differently (tobj numbers them in order of first use).
+fn corners(mesh: &SourceMesh) -> Vec<[CornerAttributes; 3]> {
+    let corner = |i: u32| {
+        let i = i as usize;
+        let normal = mesh.normals.as_ref().map_or([9.0; 3], |n| n[i]);
+        let uv = mesh.uvs.as_ref().map_or([9.0; 2], |u| u[i]);
+        (mesh.positions[i], normal, uv)
+    };
+    mesh.indices.chunks_exact(3).map(|t| [corner(t[0]), corner(t[1]), corner(t[2])]).collect()
+}
+
+#[test]
+fn ply_cube_in_every_encoding_equals_the_obj() {
+    let obj = import_ok(&data("cube.obj"));
+    assert_eq!(obj.triangle_count(), 12);
+    let expected = corners(&obj);
+    for name in ["cube_ascii.ply", "cube_binary_le.ply", "cube_binary_be.ply"] {
+        let ply = import_ok(&data(name));
+        assert_eq!(ply.positions.len(), 8, "{name}: one vertex per PLY vertex");
+        assert_eq!(ply.materials, vec![0; 12], "{name}");
+        assert_eq!(ply.degenerate_dropped, 0, "{name}");
+        let got = corners(&ply);
+        assert_eq!(got.len(), expected.len(), "{name}");
+        for (g, e) in got.iter().zip(&expected) {
+            for k in 0..3 {
+                assert_eq!((g[k].0, g[k].2), (e[k].0, e[k].2), "{name}: position and UV");
+                // The OBJ's normals went through 9 decimal digits: equal to within rounding.
+                assert!((0..3).all(|c| (g[k].1[c] - e[k].1[c]).abs() < 1e-6), "{name}: normal {g:?} {e:?}");
+            }
+        }
+        assert!(referenced_files(&data(name)).unwrap().is_empty());
+    }
+}
+
+#[test]
+fn ply_faces_before_vertices_pentagon_and_texture_uv() {
+    let mesh = import_ok(&data("faces_first_pentagon.ply"));
+    assert_eq!(mesh.triangle_count(), 3, "pentagon fan; the two-index face is skipped");
+    assert_eq!(mesh.indices, vec![0, 1, 2, 0, 2, 3, 0, 3, 4]);
+    let area: f32 = triangles(&mesh).iter().map(|t| geometric_normal(t)[2] / 2.0).sum();
+    assert!((area - 5.0).abs() < 1e-6, "area {area}");
+    assert_eq!(mesh.uvs.unwrap()[4], [0.0, 0.5], "texture_u / texture_v");
+    assert!(mesh.normals.is_none());
+}
+
+#[test]
+fn ply_limits_are_enforced() {
+    let one_triangle = ImportLimits { max_triangles: 1, ..ImportLimits::default() };
+    let tiny_file = ImportLimits { max_file_bytes: 100, ..ImportLimits::default() };
+    for limits in [one_triangle, tiny_file] {
+        let err = import_file(&data("cube_binary_le.ply"), &limits).unwrap_err();
+        assert!(matches!(err.kind, ImportErrorKind::TooLarge(_)), "{err}");
+    }
+    // Vertices: three times the triangle limit.
+    let two_vertices = ImportLimits { max_triangles: 2, ..ImportLimits::default() };
+    let err = import_file(&data("cube_ascii.ply"), &two_vertices).unwrap_err();
+    assert!(err.to_string().contains("8 vertices, the limit is 6"), "{err}");
 }
 
 // ---------------------------------------------------------------------------------------
