@@ -419,11 +419,7 @@ impl EncodedCluster {
 }
 
 /// Encodes one cluster: its header (block offsets filled in by [`assemble_page`]) and blocks.
-fn encode_blocks(
-    c: &DagCluster,
-    h: &Header,
-    index: usize,
-) -> Result<(ClusterHeader, Blocks), WriteError> {
+fn encode_blocks(c: &DagCluster, h: &Header, index: usize) -> Result<(ClusterHeader, Blocks), WriteError> {
     let flags = h.flags;
     let bad = |problem: String| WriteError::BadCluster { cluster: index, problem };
     let vertex_count = c.positions.len();
