@@ -2,21 +2,22 @@
 //! between a real `.mres` file and an "unsealed" one whose pages are stored uncompressed and
 //! whose checksums are not checked, so that a mutation of a hierarchy record, page-table
 //! field or cluster byte reaches the reader's consistency checks instead of being stopped by
-//! blake3 or zstd. Offsets follow `docs/FORMAT.md` (header fields at fixed positions).
+//! blake3 or zstd. Field offsets are the reader's own (`mres_format::records`, which mirrors
+//! `docs/FORMAT.md` §2 and §4.1).
 
+use mres_format::records::{meta_checksum, HeaderRecord, PageRecord};
 use mres_format::{HEADER_SIZE, PAGE_RECORD_SIZE};
 
-const PAGE_COUNT_AT: usize = 68;
-const HIERARCHY_OFFSET_AT: usize = 80;
-const HIERARCHY_SIZE_AT: usize = 88;
-const TABLE_OFFSET_AT: usize = 96;
-const TABLE_SIZE_AT: usize = 104;
-const CHECKSUM_AT: usize = 112;
-/// Within a page record: u64 offset, u32 compressed size, u32 raw size, [u8; 32] blake3.
-const REC_OFFSET: usize = 0;
-const REC_COMPRESSED: usize = 8;
-const REC_RAW: usize = 12;
-const REC_CHECKSUM: usize = 16;
+const PAGE_COUNT_AT: usize = HeaderRecord::PAGE_COUNT;
+const HIERARCHY_OFFSET_AT: usize = HeaderRecord::HIERARCHY_OFFSET;
+const HIERARCHY_SIZE_AT: usize = HeaderRecord::HIERARCHY_SIZE;
+const TABLE_OFFSET_AT: usize = HeaderRecord::PAGE_TABLE_OFFSET;
+const TABLE_SIZE_AT: usize = HeaderRecord::PAGE_TABLE_SIZE;
+const CHECKSUM_AT: usize = HeaderRecord::META_CHECKSUM;
+const REC_OFFSET: usize = PageRecord::OFFSET;
+const REC_COMPRESSED: usize = PageRecord::COMPRESSED_SIZE;
+const REC_RAW: usize = PageRecord::RAW_SIZE;
+const REC_CHECKSUM: usize = PageRecord::CHECKSUM;
 
 fn u32_at(b: &[u8], at: usize) -> Option<u32> {
     Some(u32::from_le_bytes(b.get(at..at.checked_add(4)?)?.try_into().ok()?))
@@ -44,14 +45,11 @@ fn layout(b: &[u8]) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>, u
     Some((hierarchy, table, pages))
 }
 
-/// Rewrites the header checksum over header[..112], hierarchy and page table.
+/// Rewrites the header checksum over the header's first bytes, hierarchy and page table.
 fn seal_header(out: &mut [u8]) {
     let Some((hierarchy, table, _)) = layout(out) else { return };
-    let mut hasher = blake3::Hasher::new();
-    hasher.update(&out[..CHECKSUM_AT]);
-    hasher.update(&out[hierarchy]);
-    hasher.update(&out[table]);
-    let hash = *hasher.finalize().as_bytes();
+    let Some(head) = out.first_chunk::<HEADER_SIZE>() else { return };
+    let hash = meta_checksum(head, &out[hierarchy], &out[table]);
     out[CHECKSUM_AT..CHECKSUM_AT + 32].copy_from_slice(&hash);
 }
 

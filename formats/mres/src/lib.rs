@@ -1,18 +1,73 @@
 //! The `.mres` container: a multiresolution cluster DAG in streamable, checksummed pages.
 //!
-//! The byte-level specification is `docs/FORMAT.md`; this module is its reference
-//! implementation. [`write::write_mres`] turns a logical [`Dag`] into bytes, [`read::MresFile`]
-//! parses and checks them, and [`select`] is the CPU reference of the LOD selection rule that
-//! the validator and the GPU path share.
+//! The byte-level specification is `docs/FORMAT.md`; this crate is its reference
+//! implementation, and what an engine links to read `.mres` files:
+//!
+//! - [`write_mres`] turns a logical [`Dag`] into bytes;
+//! - [`MresFile`] parses and checks a whole file held in memory;
+//! - [`MresIndex`] parses the resident prefix (header, hierarchy, page table) alone, and
+//!   decodes pages whose bytes the caller fetched itself ([`MresIndex::decode_page`]);
+//! - [`select`] is the CPU reference of the LOD selection rule that the validator and the
+//!   GPU path share;
+//! - [`records`] names every field offset of the fixed-size records.
+//!
+//! Write a small DAG (one triangle, simplified into a root that is the same triangle) and
+//! read it back:
+//!
+//! ```
+//! use mres_format::*;
+//!
+//! let triangle = |group, own_group| DagCluster {
+//!     group,
+//!     own_group,
+//!     positions: vec![[0, 0, 0], [1000, 0, 0], [0, 1000, 0]],
+//!     normals: Vec::new(),
+//!     uvs: Vec::new(),
+//!     indices: vec![0, 1, 2],
+//!     materials: Vec::new(),
+//! };
+//! let sphere = Sphere { center: [0.5, 0.5, 0.0], radius: 1.0 };
+//! let group = |error, level| Group { sphere, error, level, first_cluster: 0, cluster_count: 0, page: 0 };
+//! let dag = Dag {
+//!     header: Header {
+//!         flags: 0,
+//!         grid: Grid { origin: [0.0; 3], step: 0.001 },
+//!         uv: UvQuant { min: [0.0; 2], extent: [0.0; 2] },
+//!         normal_bits: 0,
+//!         position_bits: 10,
+//!         level_count: 0, // the writer counts the levels
+//!         source_triangles: 1,
+//!     },
+//!     // Group 0 holds the original cluster; group 1 is the root, holding its simplification.
+//!     groups: vec![group(0.0, 0), group(f32::INFINITY, 1)],
+//!     clusters: vec![triangle(0, NO_GROUP), triangle(1, 0)],
+//! };
+//! let bytes = write_mres(&dag, 3)?;
+//!
+//! let file = MresFile::parse(bytes)?;
+//! assert_eq!(file.header.level_count, 2);
+//! // Stored coarse to fine: the root group and its cluster first.
+//! assert_eq!(file.groups[0].error, f32::INFINITY);
+//! let clusters = file.decode_all()?;
+//! assert_eq!(clusters[1].positions, dag.clusters[0].positions);
+//! let corner = file.header.grid.decode(clusters[1].positions[1]);
+//! assert_eq!(corner, [1000.0 * 0.001, 0.0, 0.0]);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![deny(missing_docs)]
+#![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod bits;
+pub mod page;
 pub mod read;
+pub mod records;
 pub mod select;
 pub mod write;
 
-pub use read::{DecodedCluster, MresError, MresFile};
+pub use page::{DecodedCluster, Page};
+pub use read::{MresError, MresFile, MresIndex};
+pub use records::ClusterHeader;
 pub use select::{uniform_cut, view_cut, ViewParams};
 pub use write::write_mres;
 
@@ -226,4 +281,54 @@ pub struct DagCluster {
     pub indices: Vec<u8>,
     /// Material per triangle (with [`FLAG_MATERIALS`]).
     pub materials: Vec<u16>,
+}
+
+impl Dag {
+    /// A small valid DAG with every attribute: four level-0 clusters (a strip of quads) in one
+    /// group, simplified into one root cluster. For examples and tests; its normals and UVs
+    /// are exactly representable, so they survive a round trip unchanged.
+    pub fn sample() -> Dag {
+        let normal_bits = 10;
+        let n = bits::oct_decode(bits::oct_encode([0.0, 0.0, 1.0], normal_bits), normal_bits);
+        let uv = UvQuant { min: [0.0, 0.0], extent: [1.0, 1.0] };
+        let cluster = |x0: i32, group: u32, own_group: u32, material: u16| {
+            let positions = vec![[x0, 0, 5], [x0 + 100, 0, 5], [x0, 100, 5], [x0 + 100, 100, 7]];
+            DagCluster {
+                group,
+                own_group,
+                uvs: positions
+                    .iter()
+                    .map(|p| uv.decode(uv.quantize([p[0] as f32 / 1000.0, p[1] as f32 / 1000.0])))
+                    .collect(),
+                normals: vec![n; 4],
+                positions,
+                indices: vec![0, 1, 2, 1, 3, 2],
+                materials: vec![material, material + 1],
+            }
+        };
+        let mut clusters: Vec<DagCluster> = (0..4).map(|i| cluster(i * 100, 0, NO_GROUP, i as u16)).collect();
+        clusters.push(cluster(0, 1, 0, 9));
+        let sphere = |r| Sphere { center: [0.2, 0.05, 0.005], radius: r };
+        let group = |radius, error, level| Group {
+            sphere: sphere(radius),
+            error,
+            level,
+            first_cluster: 0,
+            cluster_count: 0,
+            page: 0,
+        };
+        Dag {
+            header: Header {
+                flags: FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS,
+                grid: Grid { origin: [0.0; 3], step: 0.001 },
+                uv,
+                normal_bits,
+                position_bits: 16,
+                level_count: 0,
+                source_triangles: 8,
+            },
+            groups: vec![group(1.0, 0.01, 0), group(2.0, f32::INFINITY, 1)],
+            clusters,
+        }
+    }
 }

@@ -1,9 +1,13 @@
-//! Reader: parses and checks a `.mres` file. Every offset, length, reference and checksum is
-//! checked before use; corrupt input gives a typed [`MresError`], never a panic.
+//! Reader: parses and checks a `.mres` file, whole ([`MresFile`]) or as its resident prefix
+//! ([`MresIndex`]) with pages fetched by the caller ([`MresIndex::decode_page`]). Both use the
+//! same steps: decode the records ([`crate::records`]), then check them. Every offset,
+//! length, reference and checksum is checked before use; corrupt input gives a typed
+//! [`MresError`], never a panic.
 
-use super::bits::{oct_decode, read_bits};
-use super::write::meta_checksum;
+use super::page::{decode_page, decompress_page, read_cluster, Page};
+use super::records::{meta_checksum, ClusterRecord, GroupRecord, HeaderRecord, PageRecord};
 use super::*;
+use std::ops::Range;
 
 /// What is wrong with a `.mres` file.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -38,6 +42,16 @@ pub enum MresError {
     /// A value or reference is out of range or inconsistent.
     #[error("corrupt {0}")]
     Corrupt(String),
+    /// The bytes given for a page are not as long as the page table says.
+    #[error("page {page}: {len} compressed bytes given, the page table says {expected}")]
+    PageLength {
+        /// Page index.
+        page: u32,
+        /// Bytes given.
+        len: u64,
+        /// `compressed_size` in the page table.
+        expected: u32,
+    },
     /// A page does not decompress to its declared size.
     #[error("page {page}: {problem}")]
     Decompress {
@@ -48,7 +62,109 @@ pub enum MresError {
     },
 }
 
+/// The resident part of a `.mres` file — header, hierarchy and page table — parsed and checked
+/// from a prefix of the file, for a streamer that fetches pages itself.
+///
+/// The prefix runs from byte 0 to the first page. Its length is in the fixed-size header:
+/// read [`HEADER_SIZE`] bytes and pass them to [`MresIndex::prefix_len`]. (A prefix that is
+/// too short also gives [`MresError::Truncated`], whose `end` is the length needed.) Page `p`
+/// is then the byte range [`MresIndex::page_range`] of the file, and
+/// [`MresIndex::decode_page`] checks and decodes it.
+///
+/// ```
+/// # fn main() -> Result<(), mres_format::MresError> {
+/// # let file = mres_format::write_mres(&mres_format::Dag::sample(), 3).expect("writes");
+/// use mres_format::{MresIndex, HEADER_SIZE};
+/// // Stands for reading a byte range of the file from disk or the network.
+/// let fetch = |r: std::ops::Range<u64>| file[r.start as usize..r.end as usize].to_vec();
+///
+/// let prefix_len = MresIndex::prefix_len(&fetch(0..HEADER_SIZE as u64))?;
+/// let index = MresIndex::parse(&fetch(0..prefix_len))?;
+/// assert_eq!(index.file_size(), file.len() as u64);
+/// // Pages are stored coarse to fine: page 0 holds the root.
+/// let page = index.decode_page(0, &fetch(index.page_range(0)?))?;
+/// for (i, cluster) in page.clusters.iter().enumerate() {
+///     let record = &index.clusters[page.first_cluster as usize + i];
+///     assert_eq!(cluster.indices.len(), 3 * record.triangle_count as usize);
+/// }
+/// // The GPU layout: cluster headers, then data blocks at the headers' offsets.
+/// assert_eq!(page.bytes.len(), index.pages[0].raw_size as usize);
+/// # Ok(())
+/// # }
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct MresIndex {
+    /// File-wide parameters.
+    pub header: Header,
+    /// Groups, coarse to fine.
+    pub groups: Vec<Group>,
+    /// Clusters, in page order.
+    pub clusters: Vec<ClusterInfo>,
+    /// Page table.
+    pub pages: Vec<PageInfo>,
+    /// End of the last page: the length of the whole file.
+    file_size: u64,
+}
+
+impl MresIndex {
+    /// The length of the resident prefix (header, hierarchy and page table; the file offset of
+    /// the first page), from the start of the file: at least its first [`HEADER_SIZE`] bytes.
+    /// The header's fields are checked; a shorter `start` gives [`MresError::Truncated`].
+    pub fn prefix_len(start: &[u8]) -> Result<u64, MresError> {
+        let (record, _) = read_header(start)?;
+        Ok(record.prefix_len().unwrap_or(u64::MAX))
+    }
+
+    /// Parses and checks the header, hierarchy and page table from `prefix`, the first
+    /// [`MresIndex::prefix_len`] bytes of the file (or more: the rest is ignored).
+    pub fn parse(prefix: &[u8]) -> Result<MresIndex, MresError> {
+        let (r, head) = read_header(prefix)?;
+        let resident_len = r.prefix_len().unwrap_or(u64::MAX);
+        let resident = section(prefix, 0, resident_len, "header, hierarchy and page table")?;
+        // read_header checked that the hierarchy follows the header and the table follows it,
+        // with sizes that hold the records the header counts.
+        let (hierarchy, table) = split(&resident[HEADER_SIZE..], r.hierarchy_size, "hierarchy")?;
+        if meta_checksum(head, hierarchy, table) != r.meta_checksum {
+            return Err(MresError::Checksum("header, hierarchy or page table".into()));
+        }
+        let group_bytes = r.group_count as u64 * GROUP_RECORD_SIZE as u64;
+        let (group_bytes, cluster_bytes) = split(hierarchy, group_bytes, "group records")?;
+        let groups = decode_groups(group_bytes, &r)?;
+        let clusters = decode_clusters(cluster_bytes, &groups)?;
+        let pages = decode_page_table(table, &r)?;
+        check_group_tiling(&groups, clusters.len())?;
+        let file_size = check_page_tiling(&pages, resident_len)?;
+        check_group_pages(&groups, &pages)?;
+        Ok(MresIndex { header: r.header(), groups, clusters, pages, file_size })
+    }
+
+    /// The length of the whole file, as the page table implies (the end of the last page).
+    pub fn file_size(&self) -> u64 {
+        self.file_size
+    }
+
+    /// The byte range of the file holding page `p`'s compressed bytes.
+    pub fn page_range(&self, p: u32) -> Result<Range<u64>, MresError> {
+        let info = page_info(&self.pages, p)?;
+        Ok(info.offset..info.offset + info.compressed_size as u64)
+    }
+
+    /// Checks `compressed`, the bytes of [`MresIndex::page_range`] the caller fetched, against
+    /// page `p`'s table entry (length and checksum), decompresses them and decodes the page's
+    /// clusters, checking each.
+    pub fn decode_page(&self, p: u32, compressed: &[u8]) -> Result<Page, MresError> {
+        decode_page(&self.header, &self.clusters, page_info(&self.pages, p)?, p, compressed)
+    }
+
+    /// Decodes cluster `index` from its page's decompressed bytes ([`Page::bytes`]).
+    pub fn decode_cluster(&self, page_raw: &[u8], index: u32) -> Result<DecodedCluster, MresError> {
+        decode_one(&self.header, &self.clusters, page_raw, index)
+    }
+}
+
 /// A parsed `.mres` file: the resident hierarchy plus the raw bytes the pages are read from.
+/// Built on [`MresIndex`]: the same records, checks and page decoding, with the file's
+/// length checked against the page table.
 #[derive(Debug, Clone)]
 pub struct MresFile {
     /// File-wide parameters.
@@ -62,63 +178,6 @@ pub struct MresFile {
     bytes: Vec<u8>,
 }
 
-/// One decoded cluster.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DecodedCluster {
-    /// Positions on the global grid (decode with [`Grid::decode`]).
-    pub positions: Vec<[i32; 3]>,
-    /// Unit normals (empty without [`FLAG_NORMALS`]).
-    pub normals: Vec<[f32; 3]>,
-    /// UVs (empty without [`FLAG_UVS`]).
-    pub uvs: Vec<[f32; 2]>,
-    /// Local triangle indices.
-    pub indices: Vec<u8>,
-    /// Material per triangle (empty without [`FLAG_MATERIALS`]).
-    pub materials: Vec<u16>,
-}
-
-/// Bounds-checked little-endian reads from a section of the file.
-struct Cursor<'a> {
-    bytes: &'a [u8],
-    at: usize,
-}
-
-impl<'a> Cursor<'a> {
-    fn u16(&mut self) -> u16 {
-        let v = u16::from_le_bytes([self.bytes[self.at], self.bytes[self.at + 1]]);
-        self.at += 2;
-        v
-    }
-    fn u32(&mut self) -> u32 {
-        let b = &self.bytes[self.at..self.at + 4];
-        self.at += 4;
-        u32::from_le_bytes([b[0], b[1], b[2], b[3]])
-    }
-    fn u64(&mut self) -> u64 {
-        let lo = self.u32() as u64;
-        lo | (self.u32() as u64) << 32
-    }
-    fn f32(&mut self) -> f32 {
-        f32::from_bits(self.u32())
-    }
-    fn f32s<const N: usize>(&mut self) -> [f32; N] {
-        std::array::from_fn(|_| self.f32())
-    }
-}
-
-/// Returns `bytes[start..start+len]` or a `Truncated` error naming `what`.
-fn section<'a>(bytes: &'a [u8], start: u64, len: u64, what: &str) -> Result<&'a [u8], MresError> {
-    let end = start.saturating_add(len);
-    if end > bytes.len() as u64 {
-        return Err(MresError::Truncated { what: what.into(), start, end, len: bytes.len() as u64 });
-    }
-    Ok(&bytes[start as usize..end as usize])
-}
-
-fn corrupt(msg: String) -> MresError {
-    MresError::Corrupt(msg)
-}
-
 impl MresFile {
     /// Reads and parses a file from disk.
     pub fn open(path: &std::path::Path) -> Result<MresFile, MresError> {
@@ -127,219 +186,11 @@ impl MresFile {
     }
 
     /// Parses the header, hierarchy and page table and checks their consistency and checksum.
-    /// Pages are checked when read ([`MresFile::page`]) or all at once ([`MresFile::decode_all`]).
+    /// Pages are checked when read ([`MresFile::page`], [`MresFile::decode_page`]) or all at
+    /// once ([`MresFile::decode_all`]).
     pub fn parse(bytes: Vec<u8>) -> Result<MresFile, MresError> {
-        let head = section(&bytes, 0, HEADER_SIZE as u64, "header")?;
-        if head[0..4] != MAGIC {
-            return Err(MresError::BadMagic);
-        }
-        let mut c = Cursor { bytes: head, at: 4 };
-        let version = c.u32();
-        if version != VERSION {
-            return Err(MresError::WrongVersion { found: version });
-        }
-        let header_size = c.u32();
-        if header_size as usize != HEADER_SIZE {
-            return Err(corrupt(format!("header: size {header_size}, expected {HEADER_SIZE}")));
-        }
-        let flags = c.u32();
-        let origin = c.f32s::<3>();
-        let step = c.f32();
-        let uv_min = c.f32s::<2>();
-        let uv_extent = c.f32s::<2>();
-        let normal_bits = c.u32();
-        let position_bits = c.u32();
-        let level_count = c.u32();
-        let group_count = c.u32();
-        let cluster_count = c.u32();
-        let page_count = c.u32();
-        let source_triangles = c.u64();
-        let hierarchy_offset = c.u64();
-        let hierarchy_size = c.u64();
-        let page_table_offset = c.u64();
-        let page_table_size = c.u64();
-        let stored_checksum: [u8; 32] = head[112..144].try_into().map_err(|_| corrupt("header".into()))?;
-        if head[144..HEADER_SIZE].iter().any(|&b| b != 0) {
-            return Err(corrupt("header: reserved bytes are not zero".into()));
-        }
-
-        if flags & !(FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS) != 0 {
-            return Err(corrupt(format!("header: unknown flags {flags:#x}")));
-        }
-        if !(step.is_finite() && step > 0.0 && origin.iter().chain(&uv_min).chain(&uv_extent).all(|v| v.is_finite())) {
-            return Err(corrupt("header: non-finite or non-positive quantization parameters".into()));
-        }
-        if flags & FLAG_NORMALS != 0 && !(4..=16).contains(&normal_bits) {
-            return Err(corrupt(format!("header: normal_bits {normal_bits} outside 4..=16")));
-        }
-        let expected_hierarchy =
-            group_count as u64 * GROUP_RECORD_SIZE as u64 + cluster_count as u64 * CLUSTER_RECORD_SIZE as u64;
-        if hierarchy_offset != HEADER_SIZE as u64 || hierarchy_size != expected_hierarchy {
-            return Err(corrupt(format!(
-                "header: hierarchy at {hierarchy_offset} size {hierarchy_size}, expected {HEADER_SIZE} and {expected_hierarchy}"
-            )));
-        }
-        if page_table_offset != hierarchy_offset + hierarchy_size {
-            return Err(corrupt("header: page table does not follow the hierarchy".into()));
-        }
-        let min_table = page_count as u64 * PAGE_RECORD_SIZE as u64;
-        if page_table_size < min_table || !(page_table_size - min_table).is_multiple_of(4) {
-            return Err(corrupt(format!("header: page table size {page_table_size} for {page_count} pages")));
-        }
-        let hierarchy = section(&bytes, hierarchy_offset, hierarchy_size, "hierarchy")?;
-        let table = section(&bytes, page_table_offset, page_table_size, "page table")?;
-        if meta_checksum(head, hierarchy, table) != stored_checksum {
-            return Err(MresError::Checksum("header, hierarchy or page table".into()));
-        }
-        let pages_start = page_table_offset + page_table_size;
-
-        let mut c = Cursor { bytes: hierarchy, at: 0 };
-        let mut groups = Vec::with_capacity(group_count as usize);
-        for g in 0..group_count {
-            let center = c.f32s::<3>();
-            let [radius, error] = c.f32s::<2>();
-            let (level, first_cluster, count, page, _reserved) = (c.u32(), c.u32(), c.u32(), c.u32(), c.u32());
-            let finite = center.iter().all(|v| v.is_finite()) && radius.is_finite() && radius >= 0.0;
-            if !finite || error.is_nan() || error < 0.0 {
-                return Err(corrupt(format!("group {g}: bad sphere or error")));
-            }
-            if count == 0
-                || first_cluster as u64 + count as u64 > cluster_count as u64
-                || page >= page_count
-                || level >= level_count
-            {
-                return Err(corrupt(format!("group {g}: cluster range, page or level out of range")));
-            }
-            groups.push(Group {
-                sphere: Sphere { center, radius },
-                error,
-                level,
-                first_cluster,
-                cluster_count: count,
-                page,
-            });
-        }
-        let mut clusters = Vec::with_capacity(cluster_count as usize);
-        for i in 0..cluster_count {
-            let (group, own_group) = (c.u32(), c.u32());
-            let (vertex_count, triangle_count) = (c.u16(), c.u16());
-            let page_offset = c.u32();
-            let in_group = groups
-                .get(group as usize)
-                .is_some_and(|g| (g.first_cluster..g.first_cluster + g.cluster_count).contains(&i));
-            if !in_group || (own_group != NO_GROUP && own_group >= group_count) {
-                return Err(corrupt(format!("cluster {i}: group reference out of range")));
-            }
-            if vertex_count == 0
-                || vertex_count as usize > MAX_CLUSTER_VERTICES
-                || triangle_count == 0
-                || triangle_count as usize > MAX_CLUSTER_TRIANGLES
-            {
-                return Err(corrupt(format!("cluster {i}: {vertex_count} vertices, {triangle_count} triangles")));
-            }
-            clusters.push(ClusterInfo { group, own_group, vertex_count, triangle_count, page_offset });
-        }
-
-        let mut c = Cursor { bytes: table, at: 0 };
-        let dep_count = (page_table_size - min_table) / 4;
-        let mut pages = Vec::with_capacity(page_count as usize);
-        let mut raw_records = Vec::with_capacity(page_count as usize);
-        for p in 0..page_count {
-            let offset = c.u64();
-            let (compressed_size, raw_size) = (c.u32(), c.u32());
-            let checksum: [u8; 32] = std::array::from_fn(|_| {
-                c.at += 1;
-                table[c.at - 1]
-            });
-            let (first_cluster, count, first_group, group_count_here, dep_first, deps) =
-                (c.u32(), c.u32(), c.u32(), c.u32(), c.u32(), c.u32());
-            let end = offset.checked_add(compressed_size as u64);
-            if offset < pages_start || end.is_none_or(|e| e > bytes.len() as u64) {
-                return Err(MresError::Truncated {
-                    what: format!("page {p}"),
-                    start: offset,
-                    end: end.unwrap_or(u64::MAX),
-                    len: bytes.len() as u64,
-                });
-            }
-            if raw_size as usize > MAX_PAGE_RAW_SIZE {
-                return Err(corrupt(format!(
-                    "page {p}: claims {raw_size} decompressed bytes (limit {MAX_PAGE_RAW_SIZE})"
-                )));
-            }
-            let clusters_ok = first_cluster as u64 + count as u64 <= cluster_count as u64;
-            let groups_ok = first_group as u64 + group_count_here as u64 <= group_count as u64;
-            if !clusters_ok || !groups_ok || dep_first as u64 + deps as u64 > dep_count {
-                return Err(corrupt(format!("page {p}: cluster, group or dependency range out of range")));
-            }
-            raw_records.push((dep_first, deps));
-            pages.push(PageInfo {
-                offset,
-                compressed_size,
-                raw_size,
-                checksum,
-                first_cluster,
-                cluster_count: count,
-                first_group,
-                group_count: group_count_here,
-                dependencies: Vec::new(),
-            });
-        }
-        for (p, (dep_first, deps)) in raw_records.into_iter().enumerate() {
-            let mut list = Vec::with_capacity(deps as usize);
-            c.at = PAGE_RECORD_SIZE * page_count as usize + dep_first as usize * 4;
-            for _ in 0..deps {
-                let d = c.u32();
-                if d >= page_count {
-                    return Err(corrupt(format!("page {p}: dependency {d} out of range")));
-                }
-                list.push(d);
-            }
-            pages[p].dependencies = list;
-        }
-        // Group ranges tile the clusters in order; pages tile the page data.
-        let mut next_cluster = 0u64;
-        for (g, group) in groups.iter().enumerate() {
-            if group.first_cluster as u64 != next_cluster {
-                return Err(corrupt(format!("group {g}: clusters do not follow the previous group's")));
-            }
-            next_cluster += group.cluster_count as u64;
-        }
-        if next_cluster != cluster_count as u64 {
-            return Err(corrupt("groups do not cover every cluster".into()));
-        }
-        let mut next_offset = pages_start;
-        for (p, page) in pages.iter().enumerate() {
-            if page.offset != next_offset {
-                return Err(corrupt(format!(
-                    "page {p}: data at {} but the previous page ends at {next_offset}",
-                    page.offset
-                )));
-            }
-            next_offset += page.compressed_size as u64;
-        }
-        if next_offset != bytes.len() as u64 {
-            return Err(corrupt(format!("page data ends at {next_offset} but the file has {} bytes", bytes.len())));
-        }
-        // Each group's clusters must lie in the page it names.
-        for (g, group) in groups.iter().enumerate() {
-            let page = &pages[group.page as usize];
-            let inside = group.first_cluster >= page.first_cluster
-                && group.first_cluster + group.cluster_count <= page.first_cluster + page.cluster_count;
-            if !inside {
-                return Err(corrupt(format!("group {g}: clusters not within page {}", group.page)));
-            }
-        }
-
-        let header = Header {
-            flags,
-            grid: Grid { origin, step },
-            uv: UvQuant { min: uv_min, extent: uv_extent },
-            normal_bits,
-            position_bits,
-            level_count,
-            source_triangles,
-        };
+        let MresIndex { header, groups, clusters, pages, file_size } = MresIndex::parse(&bytes)?;
+        check_file_len(&pages, file_size, bytes.len() as u64)?;
         Ok(MresFile { header, groups, clusters, pages, bytes })
     }
 
@@ -349,110 +200,289 @@ impl MresFile {
     }
 
     /// Verifies page `p`'s checksum and returns its decompressed bytes (the GPU layout).
+    /// Its clusters are checked when decoded ([`MresFile::decode_cluster`]); to check them
+    /// all at once, use [`MresFile::decode_page`].
     pub fn page(&self, p: u32) -> Result<Vec<u8>, MresError> {
-        let info = self.pages.get(p as usize).ok_or_else(|| corrupt(format!("page {p} does not exist")))?;
-        let frame = section(&self.bytes, info.offset, info.compressed_size as u64, &format!("page {p}"))?;
-        if blake3::hash(frame).as_bytes() != &info.checksum {
-            return Err(MresError::Checksum(format!("page {p}")));
-        }
-        let raw = zstd::bulk::decompress(frame, info.raw_size as usize)
-            .map_err(|e| MresError::Decompress { page: p, problem: e.to_string() })?;
-        if raw.len() != info.raw_size as usize {
-            return Err(MresError::Decompress {
-                page: p,
-                problem: format!("{} bytes, table says {}", raw.len(), info.raw_size),
-            });
-        }
-        Ok(raw)
+        let (info, frame) = self.frame(p)?;
+        decompress_page(info, p, frame)
+    }
+
+    /// Checks, decompresses and decodes page `p`, as [`MresIndex::decode_page`] does.
+    pub fn decode_page(&self, p: u32) -> Result<Page, MresError> {
+        let (info, frame) = self.frame(p)?;
+        decode_page(&self.header, &self.clusters, info, p, frame)
     }
 
     /// Decodes cluster `index` from its page's decompressed bytes.
     pub fn decode_cluster(&self, page_raw: &[u8], index: u32) -> Result<DecodedCluster, MresError> {
-        let info =
-            self.clusters.get(index as usize).ok_or_else(|| corrupt(format!("cluster {index} does not exist")))?;
-        decode_cluster(&self.header, page_raw, info, index)
+        decode_one(&self.header, &self.clusters, page_raw, index)
     }
 
     /// Reads every page and decodes every cluster, in cluster order.
     pub fn decode_all(&self) -> Result<Vec<DecodedCluster>, MresError> {
         let mut out = Vec::with_capacity(self.clusters.len());
-        for (p, page) in self.pages.iter().enumerate() {
-            let raw = self.page(p as u32)?;
-            for c in page.first_cluster..page.first_cluster + page.cluster_count {
-                out.push(self.decode_cluster(&raw, c)?);
-            }
+        for p in 0..self.pages.len() as u32 {
+            out.append(&mut self.decode_page(p)?.clusters);
         }
         if out.len() != self.clusters.len() {
             return Err(corrupt(format!("pages hold {} clusters, hierarchy has {}", out.len(), self.clusters.len())));
         }
         Ok(out)
     }
+
+    /// Page `p`'s table entry and compressed bytes.
+    fn frame(&self, p: u32) -> Result<(&PageInfo, &[u8]), MresError> {
+        let info = page_info(&self.pages, p)?;
+        Ok((info, section(&self.bytes, info.offset, info.compressed_size as u64, &format!("page {p}"))?))
+    }
 }
 
-fn decode_cluster(h: &Header, raw: &[u8], info: &ClusterInfo, index: u32) -> Result<DecodedCluster, MresError> {
-    let bad = |what: &str| corrupt(format!("cluster {index}: {what}"));
-    let head = section(raw, info.page_offset as u64, CLUSTER_HEADER_SIZE as u64, &format!("cluster {index} header"))?;
-    let mut c = Cursor { bytes: head, at: 0 };
-    let (vertex_count, triangle_count) = (c.u16() as usize, c.u16() as usize);
-    if vertex_count != info.vertex_count as usize || triangle_count != info.triangle_count as usize {
-        return Err(bad("counts differ from the hierarchy"));
+/// Returns `bytes[start..start+len]` or a `Truncated` error naming `what`.
+pub(crate) fn section<'a>(bytes: &'a [u8], start: u64, len: u64, what: &str) -> Result<&'a [u8], MresError> {
+    let end = start.saturating_add(len);
+    if end > bytes.len() as u64 {
+        return Err(MresError::Truncated { what: what.into(), start, end, len: bytes.len() as u64 });
     }
-    let lo = [c.u32() as i32, c.u32() as i32, c.u32() as i32];
-    let bits = [head[16] as u32, head[17] as u32, head[18] as u32];
-    c.at = 20;
-    let offsets: [u32; 5] = std::array::from_fn(|_| c.u32());
-    if bits.iter().any(|&b| b > 32) {
-        return Err(bad("position bit width over 32"));
+    Ok(&bytes[start as usize..end as usize])
+}
+
+/// `bytes` split after `len` bytes, or a `Truncated` error naming `what` (the first part).
+fn split<'a>(bytes: &'a [u8], len: u64, what: &str) -> Result<(&'a [u8], &'a [u8]), MresError> {
+    let first = section(bytes, 0, len, what)?;
+    Ok((first, &bytes[first.len()..]))
+}
+
+pub(crate) fn corrupt(msg: String) -> MresError {
+    MresError::Corrupt(msg)
+}
+
+fn page_info(pages: &[PageInfo], p: u32) -> Result<&PageInfo, MresError> {
+    pages.get(p as usize).ok_or_else(|| corrupt(format!("page {p} does not exist")))
+}
+
+fn decode_one(h: &Header, clusters: &[ClusterInfo], raw: &[u8], index: u32) -> Result<DecodedCluster, MresError> {
+    let info = clusters.get(index as usize).ok_or_else(|| corrupt(format!("cluster {index} does not exist")))?;
+    Ok(read_cluster(h, raw, info, index)?.1)
+}
+
+/// The header record at the start of `bytes`, checked, and its bytes.
+fn read_header(bytes: &[u8]) -> Result<(HeaderRecord, &[u8; HEADER_SIZE]), MresError> {
+    let head = section(bytes, 0, HEADER_SIZE as u64, "header")?;
+    let head = head.first_chunk::<HEADER_SIZE>().ok_or_else(|| corrupt("header".into()))?;
+    let record = HeaderRecord::decode(head);
+    check_header(&record)?;
+    Ok((record, head))
+}
+
+fn check_header(r: &HeaderRecord) -> Result<(), MresError> {
+    if r.magic != MAGIC {
+        return Err(MresError::BadMagic);
     }
-    let block = |slot: usize, len: u64, what: &str| -> Result<&[u8], MresError> {
-        if offsets[slot] == 0 {
-            return Err(bad(&format!("{what} missing")));
+    if r.version != VERSION {
+        return Err(MresError::WrongVersion { found: r.version });
+    }
+    if r.header_size as usize != HEADER_SIZE {
+        return Err(corrupt(format!("header: size {}, expected {HEADER_SIZE}", r.header_size)));
+    }
+    if r.reserved.iter().any(|&b| b != 0) {
+        return Err(corrupt("header: reserved bytes are not zero".into()));
+    }
+    check_quantization(r)?;
+    check_sections(r)
+}
+
+fn check_quantization(r: &HeaderRecord) -> Result<(), MresError> {
+    if r.flags & !(FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS) != 0 {
+        return Err(corrupt(format!("header: unknown flags {:#x}", r.flags)));
+    }
+    let finite = r.grid_origin.iter().chain(&r.uv_min).chain(&r.uv_extent).all(|v| v.is_finite());
+    if !(r.grid_step.is_finite() && r.grid_step > 0.0 && finite) {
+        return Err(corrupt("header: non-finite or non-positive quantization parameters".into()));
+    }
+    if r.flags & FLAG_NORMALS != 0 && !(4..=16).contains(&r.normal_bits) {
+        return Err(corrupt(format!("header: normal_bits {} outside 4..=16", r.normal_bits)));
+    }
+    Ok(())
+}
+
+/// The section offsets and sizes agree with the counts (FORMAT.md §2).
+fn check_sections(r: &HeaderRecord) -> Result<(), MresError> {
+    let expected_hierarchy =
+        r.group_count as u64 * GROUP_RECORD_SIZE as u64 + r.cluster_count as u64 * CLUSTER_RECORD_SIZE as u64;
+    if r.hierarchy_offset != HEADER_SIZE as u64 || r.hierarchy_size != expected_hierarchy {
+        return Err(corrupt(format!(
+            "header: hierarchy at {} size {}, expected {HEADER_SIZE} and {expected_hierarchy}",
+            r.hierarchy_offset, r.hierarchy_size
+        )));
+    }
+    if r.page_table_offset != r.hierarchy_offset + r.hierarchy_size {
+        return Err(corrupt("header: page table does not follow the hierarchy".into()));
+    }
+    let min_table = r.page_count as u64 * PAGE_RECORD_SIZE as u64;
+    if r.page_table_size < min_table || !(r.page_table_size - min_table).is_multiple_of(4) {
+        return Err(corrupt(format!("header: page table size {} for {} pages", r.page_table_size, r.page_count)));
+    }
+    Ok(())
+}
+
+fn decode_groups(bytes: &[u8], r: &HeaderRecord) -> Result<Vec<Group>, MresError> {
+    let (records, _) = bytes.as_chunks::<GROUP_RECORD_SIZE>();
+    let groups: Vec<Group> = records.iter().map(GroupRecord::decode).collect();
+    for (g, group) in groups.iter().enumerate() {
+        check_group(g, group, r)?;
+    }
+    Ok(groups)
+}
+
+fn check_group(g: usize, group: &Group, r: &HeaderRecord) -> Result<(), MresError> {
+    let Sphere { center, radius } = group.sphere;
+    let finite = center.iter().all(|v| v.is_finite()) && radius.is_finite() && radius >= 0.0;
+    if !finite || group.error.is_nan() || group.error < 0.0 {
+        return Err(corrupt(format!("group {g}: bad sphere or error")));
+    }
+    if group.cluster_count == 0
+        || group.first_cluster as u64 + group.cluster_count as u64 > r.cluster_count as u64
+        || group.page >= r.page_count
+        || group.level >= r.level_count
+    {
+        return Err(corrupt(format!("group {g}: cluster range, page or level out of range")));
+    }
+    Ok(())
+}
+
+fn decode_clusters(bytes: &[u8], groups: &[Group]) -> Result<Vec<ClusterInfo>, MresError> {
+    let (records, _) = bytes.as_chunks::<CLUSTER_RECORD_SIZE>();
+    let clusters: Vec<ClusterInfo> = records.iter().map(ClusterRecord::decode).collect();
+    for (i, cluster) in clusters.iter().enumerate() {
+        check_cluster(i as u32, cluster, groups)?;
+    }
+    Ok(clusters)
+}
+
+fn check_cluster(i: u32, c: &ClusterInfo, groups: &[Group]) -> Result<(), MresError> {
+    let in_group =
+        groups.get(c.group as usize).is_some_and(|g| (g.first_cluster..g.first_cluster + g.cluster_count).contains(&i));
+    if !in_group || (c.own_group != NO_GROUP && c.own_group as usize >= groups.len()) {
+        return Err(corrupt(format!("cluster {i}: group reference out of range")));
+    }
+    let (v, t) = (c.vertex_count as usize, c.triangle_count as usize);
+    if v == 0 || v > MAX_CLUSTER_VERTICES || t == 0 || t > MAX_CLUSTER_TRIANGLES {
+        return Err(corrupt(format!("cluster {i}: {v} vertices, {t} triangles")));
+    }
+    Ok(())
+}
+
+/// The page records and the dependency array after them (FORMAT.md §4).
+fn decode_page_table(table: &[u8], r: &HeaderRecord) -> Result<Vec<PageInfo>, MresError> {
+    let (records, dependencies) = split(table, r.page_count as u64 * PAGE_RECORD_SIZE as u64, "page records")?;
+    let (records, _) = records.as_chunks::<PAGE_RECORD_SIZE>();
+    let (dependencies, _) = dependencies.as_chunks::<4>();
+    let pages_start = r.page_table_offset + r.page_table_size;
+    let mut pages = Vec::with_capacity(records.len());
+    for (p, bytes) in records.iter().enumerate() {
+        let record = PageRecord::decode(bytes);
+        check_page_record(p, &record, r, dependencies.len() as u64, pages_start)?;
+        let deps = &dependencies[record.dependency_first as usize..][..record.dependency_count as usize];
+        let deps: Vec<u32> = deps.iter().map(|&d| u32::from_le_bytes(d)).collect();
+        if let Some(d) = deps.iter().find(|&&d| d >= r.page_count) {
+            return Err(corrupt(format!("page {p}: dependency {d} out of range")));
         }
-        section(raw, offsets[slot] as u64, len, &format!("cluster {index} {what}"))
-    };
-    let stride: u64 = bits.iter().map(|&b| b as u64).sum();
-    let pos_bytes = block(0, (vertex_count as u64 * stride).div_ceil(32) * 4, "positions")?;
-    let mut positions = Vec::with_capacity(vertex_count);
-    for v in 0..vertex_count as u64 {
-        let mut p = [0i32; 3];
-        let mut at = v * stride;
-        for k in 0..3 {
-            let d = read_bits(pos_bytes, at, bits[k]).ok_or_else(|| bad("positions"))?;
-            p[k] = i32::try_from(lo[k] as i64 + d as i64).map_err(|_| bad("position overflows i32"))?;
-            at += bits[k] as u64;
+        pages.push(PageInfo {
+            offset: record.offset,
+            compressed_size: record.compressed_size,
+            raw_size: record.raw_size,
+            checksum: record.checksum,
+            first_cluster: record.first_cluster,
+            cluster_count: record.cluster_count,
+            first_group: record.first_group,
+            group_count: record.group_count,
+            dependencies: deps,
+        });
+    }
+    Ok(pages)
+}
+
+fn check_page_record(
+    p: usize,
+    rec: &PageRecord,
+    r: &HeaderRecord,
+    dependency_count: u64,
+    pages_start: u64,
+) -> Result<(), MresError> {
+    if rec.offset < pages_start {
+        return Err(corrupt(format!("page {p}: data at {} inside the page table (ends at {pages_start})", rec.offset)));
+    }
+    if rec.raw_size as usize > MAX_PAGE_RAW_SIZE {
+        return Err(corrupt(format!(
+            "page {p}: claims {} decompressed bytes (limit {MAX_PAGE_RAW_SIZE})",
+            rec.raw_size
+        )));
+    }
+    let clusters_ok = rec.first_cluster as u64 + rec.cluster_count as u64 <= r.cluster_count as u64;
+    let groups_ok = rec.first_group as u64 + rec.group_count as u64 <= r.group_count as u64;
+    let deps_ok = rec.dependency_first as u64 + rec.dependency_count as u64 <= dependency_count;
+    if !clusters_ok || !groups_ok || !deps_ok {
+        return Err(corrupt(format!("page {p}: cluster, group or dependency range out of range")));
+    }
+    Ok(())
+}
+
+/// Group ranges tile the clusters in order (FORMAT.md §3.1).
+fn check_group_tiling(groups: &[Group], cluster_count: usize) -> Result<(), MresError> {
+    let mut next_cluster = 0u64;
+    for (g, group) in groups.iter().enumerate() {
+        if group.first_cluster as u64 != next_cluster {
+            return Err(corrupt(format!("group {g}: clusters do not follow the previous group's")));
         }
-        positions.push(p);
+        next_cluster += group.cluster_count as u64;
     }
-    let mut normals = Vec::new();
-    if h.flags & FLAG_NORMALS != 0 {
-        let nlo = [u16::from_le_bytes([head[40], head[41]]) as u32, u16::from_le_bytes([head[42], head[43]]) as u32];
-        let nbits = [head[44] as u32, head[45] as u32];
-        if nbits.iter().any(|&b| b > h.normal_bits) {
-            return Err(bad("normal bit width over the header's normal_bits"));
+    if next_cluster != cluster_count as u64 {
+        return Err(corrupt("groups do not cover every cluster".into()));
+    }
+    Ok(())
+}
+
+/// Pages tile the page data from `pages_start` on (FORMAT.md §1); returns where it ends.
+fn check_page_tiling(pages: &[PageInfo], pages_start: u64) -> Result<u64, MresError> {
+    let mut next_offset = pages_start;
+    for (p, page) in pages.iter().enumerate() {
+        if page.offset != next_offset {
+            return Err(corrupt(format!(
+                "page {p}: data at {} but the previous page ends at {next_offset}",
+                page.offset
+            )));
         }
-        let stride = (nbits[0] + nbits[1]) as u64;
-        let bytes = block(1, (vertex_count as u64 * stride).div_ceil(32) * 4, "normals")?;
-        for v in 0..vertex_count as u64 {
-            let x = read_bits(bytes, v * stride, nbits[0]).ok_or_else(|| bad("normals"))?;
-            let y = read_bits(bytes, v * stride + nbits[0] as u64, nbits[1]).ok_or_else(|| bad("normals"))?;
-            normals.push(oct_decode([nlo[0] + x, nlo[1] + y], h.normal_bits));
+        next_offset = next_offset
+            .checked_add(page.compressed_size as u64)
+            .ok_or_else(|| corrupt(format!("page {p}: data ends past 2^64")))?;
+    }
+    Ok(next_offset)
+}
+
+/// Each group's clusters lie in the page it names.
+fn check_group_pages(groups: &[Group], pages: &[PageInfo]) -> Result<(), MresError> {
+    for (g, group) in groups.iter().enumerate() {
+        let page = page_info(pages, group.page)?;
+        let inside = group.first_cluster >= page.first_cluster
+            && group.first_cluster as u64 + group.cluster_count as u64
+                <= page.first_cluster as u64 + page.cluster_count as u64;
+        if !inside {
+            return Err(corrupt(format!("group {g}: clusters not within page {}", group.page)));
         }
     }
-    let mut uvs = Vec::new();
-    if h.flags & FLAG_UVS != 0 {
-        let bytes = block(2, vertex_count as u64 * 4, "uvs")?;
-        for q in bytes.chunks_exact(4) {
-            uvs.push(h.uv.decode([u16::from_le_bytes([q[0], q[1]]), u16::from_le_bytes([q[2], q[3]])]));
+    Ok(())
+}
+
+/// Every page lies inside a file of `len` bytes, and the page data ends where the file does.
+fn check_file_len(pages: &[PageInfo], data_end: u64, len: u64) -> Result<(), MresError> {
+    for (p, page) in pages.iter().enumerate() {
+        let end = page.offset.saturating_add(page.compressed_size as u64);
+        if end > len {
+            return Err(MresError::Truncated { what: format!("page {p}"), start: page.offset, end, len });
         }
     }
-    let indices = block(3, triangle_count as u64 * 3, "indices")?.to_vec();
-    if indices.iter().any(|&i| i as usize >= vertex_count) {
-        return Err(bad("local index out of range"));
+    if data_end != len {
+        return Err(corrupt(format!("page data ends at {data_end} but the file has {len} bytes")));
     }
-    let mut materials = Vec::new();
-    if h.flags & FLAG_MATERIALS != 0 {
-        let bytes = block(4, triangle_count as u64 * 2, "materials")?;
-        materials = bytes.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
-    }
-    Ok(DecodedCluster { positions, normals, uvs, indices, materials })
+    Ok(())
 }

@@ -2,6 +2,7 @@
 //! always gives the same bytes.
 
 use super::bits::{bits_for, oct_encode, BitWriter};
+use super::records::{meta_checksum, ClusterHeader, ClusterRecord, GroupRecord, HeaderRecord, PageRecord};
 use super::*;
 use rayon::prelude::*;
 
@@ -43,133 +44,175 @@ pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
 pub fn write_encoded(
     header: &Header,
     groups: &[Group],
-    mut encoded: Vec<EncodedCluster>,
+    encoded: Vec<EncodedCluster>,
     level: i32,
 ) -> Result<Vec<u8>, WriteError> {
     let layout = Layout::new(groups, &encoded)?;
     let pages = page_spans(&layout, &encoded);
+    let (groups, clusters) = renumber(&layout, &pages, groups, &encoded);
+    let dependencies = page_dependencies(&pages, &groups, &clusters);
+    let hierarchy = encode_hierarchy(&groups, &clusters);
+    let page_table_offset = (HEADER_SIZE + hierarchy.len()) as u64;
+    let dependency_total: usize = dependencies.iter().map(Vec::len).sum();
+    let page_table_size = (pages.len() * PAGE_RECORD_SIZE + dependency_total * 4) as u64;
 
-    // Renumbered hierarchy. A cluster's header sits at its index in its page × header size.
-    let mut new_groups = Vec::with_capacity(groups.len());
-    let mut clusters = Vec::with_capacity(encoded.len());
+    // The pages, straight into the file after room for the header, hierarchy and table.
+    let mut out = vec![0u8; (page_table_offset + page_table_size) as usize];
+    let frames = compress_pages(&layout, &pages, encoded, level, &mut out)?;
+    let table = encode_page_table(&pages, &dependencies, &frames);
+
+    let mut head = HeaderRecord {
+        magic: MAGIC,
+        version: VERSION,
+        header_size: HEADER_SIZE as u32,
+        flags: header.flags,
+        grid_origin: header.grid.origin,
+        grid_step: header.grid.step,
+        uv_min: header.uv.min,
+        uv_extent: header.uv.extent,
+        normal_bits: header.normal_bits,
+        position_bits: header.position_bits,
+        level_count: groups.iter().map(|g| g.level + 1).max().unwrap_or(0),
+        group_count: groups.len() as u32,
+        cluster_count: clusters.len() as u32,
+        page_count: pages.len() as u32,
+        source_triangles: header.source_triangles,
+        hierarchy_offset: HEADER_SIZE as u64,
+        hierarchy_size: hierarchy.len() as u64,
+        page_table_offset,
+        page_table_size,
+        meta_checksum: [0; 32],
+        reserved: [0; 16],
+    };
+    head.meta_checksum = meta_checksum(&head.encode(), &hierarchy, &table);
+    out[..HEADER_SIZE].copy_from_slice(&head.encode());
+    out[HEADER_SIZE..][..hierarchy.len()].copy_from_slice(&hierarchy);
+    out[page_table_offset as usize..][..table.len()].copy_from_slice(&table);
+    Ok(out)
+}
+
+/// The groups and cluster records in file order, with their ranges, pages and page offsets
+/// (a cluster's header sits at its index in its page × header size).
+fn renumber(
+    layout: &Layout,
+    pages: &[PageSpan],
+    groups: &[Group],
+    encoded: &[EncodedCluster],
+) -> (Vec<Group>, Vec<ClusterInfo>) {
     let mut page_offsets = vec![0u32; encoded.len()];
-    for page in &pages {
+    for page in pages {
         for c in 0..page.cluster_count {
             page_offsets[(page.first_cluster + c) as usize] = c * CLUSTER_HEADER_SIZE as u32;
         }
     }
-    for (new_g, &old_g) in layout.group_order.iter().enumerate() {
-        let g = &groups[old_g];
-        let (first, count) = layout.group_ranges[new_g];
-        new_groups.push(Group {
-            first_cluster: first,
-            cluster_count: count,
-            page: layout.group_page(&pages, new_g),
-            ..*g
-        });
-    }
-    for (new_c, &old_c) in layout.cluster_order.iter().enumerate() {
-        let c = &encoded[old_c];
-        clusters.push(ClusterInfo {
-            group: layout.group_new[c.group as usize],
-            own_group: if c.own_group == NO_GROUP { NO_GROUP } else { layout.group_new[c.own_group as usize] },
-            vertex_count: u16::from_le_bytes([c.header[0], c.header[1]]),
-            triangle_count: u16::from_le_bytes([c.header[2], c.header[3]]),
-            page_offset: page_offsets[new_c],
-        });
-    }
-    let groups = new_groups;
-    let dependencies = page_dependencies(&pages, &groups, &clusters);
+    let new_groups = layout
+        .group_order
+        .iter()
+        .enumerate()
+        .map(|(new_g, &old_g)| {
+            let (first_cluster, cluster_count) = layout.group_ranges[new_g];
+            Group { first_cluster, cluster_count, page: layout.group_page(pages, new_g), ..groups[old_g] }
+        })
+        .collect();
+    let renamed = |g: u32| if g == NO_GROUP { NO_GROUP } else { layout.group_new[g as usize] };
+    let clusters = layout
+        .cluster_order
+        .iter()
+        .zip(page_offsets)
+        .map(|(&old_c, page_offset)| {
+            let c = &encoded[old_c];
+            ClusterInfo {
+                group: renamed(c.group),
+                own_group: renamed(c.own_group),
+                vertex_count: c.header.vertex_count,
+                triangle_count: c.header.triangle_count,
+                page_offset,
+            }
+        })
+        .collect();
+    (new_groups, clusters)
+}
 
-    let mut hierarchy = Vec::new();
-    for g in &groups {
-        put_f32s(&mut hierarchy, &g.sphere.center);
-        put_f32s(&mut hierarchy, &[g.sphere.radius, g.error]);
-        for v in [g.level, g.first_cluster, g.cluster_count, g.page, 0] {
-            hierarchy.extend_from_slice(&v.to_le_bytes());
-        }
+/// The hierarchy section: group records, then cluster records (FORMAT.md §3).
+fn encode_hierarchy(groups: &[Group], clusters: &[ClusterInfo]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(groups.len() * GROUP_RECORD_SIZE + clusters.len() * CLUSTER_RECORD_SIZE);
+    for g in groups {
+        out.extend_from_slice(&GroupRecord::encode(g));
     }
-    for c in &clusters {
-        hierarchy.extend_from_slice(&c.group.to_le_bytes());
-        hierarchy.extend_from_slice(&c.own_group.to_le_bytes());
-        hierarchy.extend_from_slice(&c.vertex_count.to_le_bytes());
-        hierarchy.extend_from_slice(&c.triangle_count.to_le_bytes());
-        hierarchy.extend_from_slice(&c.page_offset.to_le_bytes());
+    for c in clusters {
+        out.extend_from_slice(&ClusterRecord::encode(c));
     }
-    let hierarchy_offset = HEADER_SIZE as u64;
-    let page_table_offset = hierarchy_offset + hierarchy.len() as u64;
-    let dep_total: usize = dependencies.iter().map(Vec::len).sum();
-    let page_table_size = (pages.len() * PAGE_RECORD_SIZE + dep_total * 4) as u64;
+    out
+}
 
-    // The pages, straight into the file after room for the header, hierarchy and table.
-    let mut out = vec![0u8; (page_table_offset + page_table_size) as usize];
-    let mut frames: Vec<(u64, u32, [u8; 32])> = Vec::with_capacity(pages.len());
+/// Where a page's compressed bytes went in the file.
+struct Frame {
+    offset: u64,
+    size: u32,
+    checksum: [u8; 32],
+}
+
+/// Compresses the pages in parallel batches, appending each to `out` in page order and freeing
+/// its clusters' data once written.
+fn compress_pages(
+    layout: &Layout,
+    pages: &[PageSpan],
+    mut encoded: Vec<EncodedCluster>,
+    level: i32,
+    out: &mut Vec<u8>,
+) -> Result<Vec<Frame>, WriteError> {
+    let members = |page: &PageSpan| &layout.cluster_order[page.first_cluster as usize..][..page.cluster_count as usize];
+    let mut frames = Vec::with_capacity(pages.len());
     for batch in pages.chunks(PAGE_BATCH) {
         let compressed: Vec<Vec<u8>> = batch
             .par_iter()
             .map(|page| {
-                let members = &layout.cluster_order[page.first_cluster as usize..][..page.cluster_count as usize];
-                let members: Vec<&EncodedCluster> = members.iter().map(|&c| &encoded[c]).collect();
-                compress_page(&members, level)
+                let clusters: Vec<&EncodedCluster> = members(page).iter().map(|&c| &encoded[c]).collect();
+                compress_page(&clusters, level)
             })
             .collect::<Result<_, _>>()?;
         for frame in compressed {
-            frames.push((out.len() as u64, frame.len() as u32, *blake3::hash(&frame).as_bytes()));
+            frames.push(Frame {
+                offset: out.len() as u64,
+                size: frame.len() as u32,
+                checksum: *blake3::hash(&frame).as_bytes(),
+            });
             out.extend_from_slice(&frame);
         }
         for page in batch {
-            for &c in &layout.cluster_order[page.first_cluster as usize..][..page.cluster_count as usize] {
+            for &c in members(page) {
                 encoded[c].data = Box::default();
             }
         }
         release_freed_memory();
     }
-    drop(encoded);
+    Ok(frames)
+}
 
-    let mut table = Vec::with_capacity(page_table_size as usize);
-    let mut dep_first = 0u32;
-    for ((page, deps), (offset, length, checksum)) in pages.iter().zip(&dependencies).zip(&frames) {
-        table.extend_from_slice(&offset.to_le_bytes());
-        table.extend_from_slice(&length.to_le_bytes());
-        table.extend_from_slice(&(page.raw_size as u32).to_le_bytes());
-        table.extend_from_slice(checksum);
-        for v in
-            [page.first_cluster, page.cluster_count, page.first_group, page.group_count, dep_first, deps.len() as u32]
-        {
-            table.extend_from_slice(&v.to_le_bytes());
-        }
-        dep_first += deps.len() as u32;
+/// The page table: page records, then the dependency array (FORMAT.md §4).
+fn encode_page_table(pages: &[PageSpan], dependencies: &[Vec<u32>], frames: &[Frame]) -> Vec<u8> {
+    let mut table = Vec::new();
+    let mut dependency_first = 0u32;
+    for ((page, deps), frame) in pages.iter().zip(dependencies).zip(frames) {
+        let record = PageRecord {
+            offset: frame.offset,
+            compressed_size: frame.size,
+            raw_size: page.raw_size as u32,
+            checksum: frame.checksum,
+            first_cluster: page.first_cluster,
+            cluster_count: page.cluster_count,
+            first_group: page.first_group,
+            group_count: page.group_count,
+            dependency_first,
+            dependency_count: deps.len() as u32,
+        };
+        table.extend_from_slice(&record.encode());
+        dependency_first += deps.len() as u32;
     }
     for d in dependencies.iter().flatten() {
         table.extend_from_slice(&d.to_le_bytes());
     }
-
-    let level_count = groups.iter().map(|g| g.level + 1).max().unwrap_or(0);
-    let h = header;
-    let mut head = Vec::with_capacity(HEADER_SIZE);
-    head.extend_from_slice(&MAGIC);
-    for v in [VERSION, HEADER_SIZE as u32, h.flags] {
-        head.extend_from_slice(&v.to_le_bytes());
-    }
-    put_f32s(&mut head, &h.grid.origin);
-    put_f32s(&mut head, &[h.grid.step]);
-    put_f32s(&mut head, &h.uv.min);
-    put_f32s(&mut head, &h.uv.extent);
-    for v in
-        [h.normal_bits, h.position_bits, level_count, groups.len() as u32, clusters.len() as u32, pages.len() as u32]
-    {
-        head.extend_from_slice(&v.to_le_bytes());
-    }
-    for v in [h.source_triangles, hierarchy_offset, hierarchy.len() as u64, page_table_offset, page_table_size] {
-        head.extend_from_slice(&v.to_le_bytes());
-    }
-    debug_assert_eq!(head.len(), 112);
-    let checksum = meta_checksum(&head, &hierarchy, &table);
-    head.extend_from_slice(&checksum);
-    out[..head.len()].copy_from_slice(&head);
-    out[HEADER_SIZE..][..hierarchy.len()].copy_from_slice(&hierarchy);
-    out[page_table_offset as usize..][..table.len()].copy_from_slice(&table);
-    Ok(out)
+    table
 }
 
 /// Pages compressed at a time: enough for every thread, few enough that the batch's frames
@@ -184,21 +227,6 @@ fn release_freed_memory() {
     // SAFETY: malloc_trim only returns free memory to the system; it has no preconditions.
     unsafe {
         libc::malloc_trim(0);
-    }
-}
-
-/// blake3 over the first 112 header bytes, the hierarchy section and the page table.
-pub(crate) fn meta_checksum(header: &[u8], hierarchy: &[u8], table: &[u8]) -> [u8; 32] {
-    let mut hasher = blake3::Hasher::new();
-    hasher.update(&header[..112]);
-    hasher.update(hierarchy);
-    hasher.update(table);
-    *hasher.finalize().as_bytes()
-}
-
-fn put_f32s(out: &mut Vec<u8>, values: &[f32]) {
-    for v in values {
-        out.extend_from_slice(&v.to_le_bytes());
     }
 }
 
@@ -313,13 +341,12 @@ fn page_spans(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageSpan> {
 /// Returns the page and its section boundaries (0, end of headers, end of each block kind).
 fn assemble_page(clusters: &[&EncodedCluster]) -> (Vec<u8>, Vec<usize>) {
     let mut raw = vec![0u8; clusters.len() * CLUSTER_HEADER_SIZE];
-    let mut headers: Vec<[u8; CLUSTER_HEADER_SIZE]> = clusters.iter().map(|c| c.header).collect();
+    let mut headers: Vec<ClusterHeader> = clusters.iter().map(|c| c.header).collect();
     let mut sections = vec![0, raw.len()];
     for slot in 0..BLOCK_KINDS {
         for (c, header) in clusters.iter().zip(&mut headers) {
             if let Some(block) = c.block(slot) {
-                let at = 20 + slot * 4;
-                header[at..at + 4].copy_from_slice(&(raw.len() as u32).to_le_bytes());
+                header.block_offsets[slot] = raw.len() as u32;
                 raw.extend_from_slice(block);
                 raw.resize(raw.len().next_multiple_of(4), 0);
             }
@@ -327,13 +354,16 @@ fn assemble_page(clusters: &[&EncodedCluster]) -> (Vec<u8>, Vec<usize>) {
         sections.push(raw.len());
     }
     for (i, header) in headers.iter().enumerate() {
-        raw[i * CLUSTER_HEADER_SIZE..][..CLUSTER_HEADER_SIZE].copy_from_slice(header);
+        raw[i * CLUSTER_HEADER_SIZE..][..CLUSTER_HEADER_SIZE].copy_from_slice(&header.encode());
     }
     (raw, sections)
 }
 
 /// Data block kinds, in page order: positions, normals, UVs, indices, materials.
 const BLOCK_KINDS: usize = 5;
+
+/// A cluster's data blocks by kind, unpadded; `None` for a kind the file does not carry.
+type Blocks = [Option<Vec<u8>>; BLOCK_KINDS];
 
 /// One cluster encoded for its page: header (block offsets not yet set) and data blocks, with
 /// the cluster's place in the DAG. Compact: a large bake holds its finished clusters so.
@@ -342,7 +372,7 @@ pub struct EncodedCluster {
     pub group: u32,
     /// Index of the group that produced it, or [`NO_GROUP`].
     pub own_group: u32,
-    header: [u8; CLUSTER_HEADER_SIZE],
+    header: ClusterHeader,
     /// The blocks, one after the other (each padded to 4 bytes).
     data: Box<[u8]>,
     /// End of each block in `data`.
@@ -389,12 +419,7 @@ impl EncodedCluster {
 }
 
 /// Encodes one cluster: its header (block offsets filled in by [`assemble_page`]) and blocks.
-#[allow(clippy::type_complexity)]
-fn encode_blocks(
-    c: &DagCluster,
-    h: &Header,
-    index: usize,
-) -> Result<([u8; CLUSTER_HEADER_SIZE], [Option<Vec<u8>>; BLOCK_KINDS]), WriteError> {
+fn encode_blocks(c: &DagCluster, h: &Header, index: usize) -> Result<(ClusterHeader, Blocks), WriteError> {
     let flags = h.flags;
     let bad = |problem: String| WriteError::BadCluster { cluster: index, problem };
     let vertex_count = c.positions.len();
@@ -416,31 +441,31 @@ fn encode_blocks(
         return Err(bad("attribute count does not match the vertex/triangle count".into()));
     }
 
-    let mut header = [0u8; CLUSTER_HEADER_SIZE];
-    header[0..2].copy_from_slice(&(vertex_count as u16).to_le_bytes());
-    header[2..4].copy_from_slice(&(triangle_count as u16).to_le_bytes());
-    let mut blocks: [Option<Vec<u8>>; BLOCK_KINDS] = Default::default();
-
     let (lo, bits, packed) = pack_ranges(c.positions.iter().map(|p| p.map(|v| v as i64)));
-    for k in 0..3 {
-        header[4 + k * 4..8 + k * 4].copy_from_slice(&(lo[k] as i32).to_le_bytes());
-        header[16 + k] = bits[k] as u8;
-    }
-    blocks[0] = Some(packed);
+    let mut header = ClusterHeader {
+        vertex_count: vertex_count as u16,
+        triangle_count: triangle_count as u16,
+        position_min: lo.map(|v| v as i32),
+        position_bits: bits.map(|b| b as u8),
+        block_offsets: [0; BLOCK_KINDS],
+        normal_min: [0; 2],
+        normal_bits: [0; 2],
+    };
+    let mut blocks: Blocks = Default::default();
+    blocks[ClusterHeader::POSITIONS] = Some(packed);
     if flags & FLAG_NORMALS != 0 {
         let (lo, bits, packed) = pack_ranges(c.normals.iter().map(|n| oct_encode(*n, h.normal_bits).map(|v| v as i64)));
-        header[40..42].copy_from_slice(&(lo[0] as u16).to_le_bytes());
-        header[42..44].copy_from_slice(&(lo[1] as u16).to_le_bytes());
-        header[44] = bits[0] as u8;
-        header[45] = bits[1] as u8;
-        blocks[1] = Some(packed);
+        header.normal_min = lo.map(|v| v as u16);
+        header.normal_bits = bits.map(|b| b as u8);
+        blocks[ClusterHeader::NORMALS] = Some(packed);
     }
     if flags & FLAG_UVS != 0 {
-        blocks[2] = Some(c.uvs.iter().flat_map(|uv| h.uv.quantize(*uv)).flat_map(u16::to_le_bytes).collect());
+        blocks[ClusterHeader::UVS] =
+            Some(c.uvs.iter().flat_map(|uv| h.uv.quantize(*uv)).flat_map(u16::to_le_bytes).collect());
     }
-    blocks[3] = Some(c.indices.clone());
+    blocks[ClusterHeader::INDICES] = Some(c.indices.clone());
     if flags & FLAG_MATERIALS != 0 {
-        blocks[4] = Some(c.materials.iter().flat_map(|m| m.to_le_bytes()).collect());
+        blocks[ClusterHeader::MATERIALS] = Some(c.materials.iter().flat_map(|m| m.to_le_bytes()).collect());
     }
     Ok((header, blocks))
 }

@@ -1,52 +1,14 @@
-//! The .mres container: byte-exact round trips, and corrupt input always gives an error
-//! (truncation at every length, every byte flipped), never a panic.
+//! The .mres container: byte-exact round trips, corrupt input always gives an error
+//! (truncation at every length, every byte flipped), never a panic, and the page-level API
+//! decodes exactly what the whole-file reader does.
 
-use mres_format::bits::{oct_decode, oct_encode};
 use mres_format::{
-    write_mres, Dag, DagCluster, Grid, Group, Header, MresError, MresFile, Sphere, UvQuant, FLAG_MATERIALS,
-    FLAG_NORMALS, FLAG_UVS, NO_GROUP,
+    write_mres, ClusterHeader, Dag, DagCluster, Grid, Group, Header, MresError, MresFile, MresIndex, Sphere, UvQuant,
+    CLUSTER_HEADER_SIZE, FLAG_MATERIALS, HEADER_SIZE, NO_GROUP,
 };
 
-/// A small two-level DAG: a strip of 4 level-0 clusters in one group, simplified into one root
-/// cluster. Normals and UVs are chosen exactly representable so decoding is exact.
 fn sample_dag() -> Dag {
-    let normal_bits = 10;
-    let n = oct_decode(oct_encode([0.0, 0.0, 1.0], normal_bits), normal_bits);
-    let uv = UvQuant { min: [0.0, 0.0], extent: [1.0, 1.0] };
-    let cluster = |x0: i32, group: u32, own_group: u32, material: u16| {
-        let positions = vec![[x0, 0, 5], [x0 + 100, 0, 5], [x0, 100, 5], [x0 + 100, 100, 7]];
-        DagCluster {
-            group,
-            own_group,
-            uvs: positions
-                .iter()
-                .map(|p| uv.decode(uv.quantize([p[0] as f32 / 1000.0, p[1] as f32 / 1000.0])))
-                .collect(),
-            normals: vec![n; 4],
-            positions,
-            indices: vec![0, 1, 2, 1, 3, 2],
-            materials: vec![material, material + 1],
-        }
-    };
-    let mut clusters: Vec<DagCluster> = (0..4).map(|i| cluster(i * 100, 0, NO_GROUP, i as u16)).collect();
-    clusters.push(cluster(0, 1, 0, 9));
-    let sphere = |r| Sphere { center: [0.2, 0.05, 0.005], radius: r };
-    Dag {
-        header: Header {
-            flags: FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS,
-            grid: Grid { origin: [0.0; 3], step: 0.001 },
-            uv,
-            normal_bits,
-            position_bits: 16,
-            level_count: 0,
-            source_triangles: 8,
-        },
-        groups: vec![
-            Group { sphere: sphere(1.0), error: 0.01, level: 0, first_cluster: 0, cluster_count: 0, page: 0 },
-            Group { sphere: sphere(2.0), error: f32::INFINITY, level: 1, first_cluster: 0, cluster_count: 0, page: 0 },
-        ],
-        clusters,
-    }
+    Dag::sample()
 }
 
 #[test]
@@ -153,4 +115,160 @@ fn huge_claimed_page_size_is_rejected() {
     v[112..144].copy_from_slice(&sum);
     let err = MresFile::parse(v).unwrap_err();
     assert!(matches!(err, MresError::Corrupt(ref m) if m.contains("decompressed")), "{err}");
+}
+
+/// A DAG spread over several pages: `n` level-0 groups of one cluster each, every one
+/// simplified into a cluster of the single root group. Positions are spread over 20 bits per
+/// axis so that clusters are large and pages fill up.
+fn multi_page_dag(n: u32) -> Dag {
+    let mut state = 0x2545_f491u32;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        (state >> 12) as i32
+    };
+    let mut cluster = |group: u32, own_group: u32| DagCluster {
+        group,
+        own_group,
+        positions: (0..256).map(|_| [next(), next(), next()]).collect(),
+        normals: Vec::new(),
+        uvs: Vec::new(),
+        indices: (0..384).map(|i| ((i * 7) % 256) as u8).collect(),
+        materials: (0..128).map(|t| t as u16).collect(),
+    };
+    let mut clusters: Vec<DagCluster> = (0..n).map(|g| cluster(g, NO_GROUP)).collect();
+    clusters.extend((0..n).map(|g| cluster(n, g)));
+    let sphere = Sphere { center: [1.0; 3], radius: 2.0 };
+    let group = |error, level| Group { sphere, error, level, first_cluster: 0, cluster_count: 0, page: 0 };
+    let mut groups: Vec<Group> = (0..n).map(|_| group(0.01, 0)).collect();
+    groups.push(group(f32::INFINITY, 1));
+    Dag {
+        header: Header {
+            flags: FLAG_MATERIALS,
+            grid: Grid { origin: [0.0; 3], step: 1e-6 },
+            uv: UvQuant { min: [0.0; 2], extent: [0.0; 2] },
+            normal_bits: 0,
+            position_bits: 20,
+            level_count: 0,
+            source_triangles: 128 * n as u64,
+        },
+        groups,
+        clusters,
+    }
+}
+
+/// Parses the prefix the way a streamer does: the header first, then the length it declares.
+fn index_of(bytes: &[u8]) -> MresIndex {
+    let prefix_len = MresIndex::prefix_len(&bytes[..HEADER_SIZE]).unwrap();
+    MresIndex::parse(&bytes[..prefix_len as usize]).unwrap()
+}
+
+#[test]
+fn pages_fetched_separately_decode_as_the_whole_file() {
+    let bytes = write_mres(&multi_page_dag(120), 1).unwrap();
+    let file = MresFile::parse(bytes.clone()).unwrap();
+    assert!(file.pages.len() >= 3, "only {} pages: the test needs several", file.pages.len());
+    let index = index_of(&bytes);
+    assert_eq!(index.header, file.header);
+    assert_eq!(index.groups, file.groups);
+    assert_eq!(index.clusters, file.clusters);
+    assert_eq!(index.pages, file.pages);
+    assert_eq!(index.file_size(), bytes.len() as u64);
+
+    let whole = file.decode_all().unwrap();
+    let mut from_pages = Vec::new();
+    for p in 0..index.pages.len() as u32 {
+        let range = index.page_range(p).unwrap();
+        // Bytes the caller fetched itself, not a view of the parsed prefix.
+        let fetched = bytes[range.start as usize..range.end as usize].to_vec();
+        let page = index.decode_page(p, &fetched).unwrap();
+        assert_eq!(page, file.decode_page(p).unwrap());
+        assert_eq!(page.bytes, file.page(p).unwrap());
+        assert_eq!(page.index, p);
+        assert_eq!(page.first_cluster, index.pages[p as usize].first_cluster);
+        assert_eq!(page.headers.len(), index.pages[p as usize].cluster_count as usize);
+        for (i, head) in page.headers.iter().enumerate() {
+            let c = page.first_cluster + i as u32;
+            let at = index.clusters[c as usize].page_offset as usize;
+            assert_eq!(at, i * CLUSTER_HEADER_SIZE);
+            let raw: &[u8; CLUSTER_HEADER_SIZE] = page.bytes[at..at + CLUSTER_HEADER_SIZE].try_into().unwrap();
+            assert_eq!(*head, ClusterHeader::decode(raw));
+            assert_eq!(index.decode_cluster(&page.bytes, c).unwrap(), page.clusters[i]);
+        }
+        from_pages.extend(page.clusters);
+    }
+    assert_eq!(from_pages, whole);
+}
+
+#[test]
+fn a_corrupt_fetched_page_gives_the_right_error() {
+    let bytes = write_mres(&multi_page_dag(40), 1).unwrap();
+    let index = index_of(&bytes);
+    let p = index.pages.len() as u32 - 1;
+    let range = index.page_range(p).unwrap();
+    let page = &bytes[range.start as usize..range.end as usize];
+    let expected = index.pages[p as usize].compressed_size;
+    assert_eq!(
+        index.decode_page(p, &page[..page.len() - 1]).unwrap_err(),
+        MresError::PageLength { page: p, len: expected as u64 - 1, expected }
+    );
+    let mut longer = page.to_vec();
+    longer.push(0);
+    assert_eq!(
+        index.decode_page(p, &longer).unwrap_err(),
+        MresError::PageLength { page: p, len: expected as u64 + 1, expected }
+    );
+    for at in [0, page.len() / 2, page.len() - 1] {
+        let mut flipped = page.to_vec();
+        flipped[at] ^= 0x10;
+        assert_eq!(index.decode_page(p, &flipped).unwrap_err(), MresError::Checksum(format!("page {p}")));
+    }
+    // Another page's bytes, of the same length or not, are never taken for this page's.
+    let other = index.page_range(0).unwrap();
+    assert!(index.decode_page(p, &bytes[other.start as usize..other.end as usize]).is_err());
+    let missing = index.pages.len() as u32;
+    assert!(matches!(index.page_range(missing), Err(MresError::Corrupt(_))));
+    assert!(matches!(index.decode_page(missing, page), Err(MresError::Corrupt(_))));
+}
+
+#[test]
+fn a_short_prefix_says_how_many_bytes_it_needs() {
+    let bytes = write_mres(&multi_page_dag(40), 1).unwrap();
+    let needs = |len: usize, end: u64| MresError::Truncated {
+        what: if end == HEADER_SIZE as u64 { "header" } else { "header, hierarchy and page table" }.into(),
+        start: 0,
+        end,
+        len: len as u64,
+    };
+    for len in [0, 4, HEADER_SIZE - 1] {
+        assert_eq!(MresIndex::prefix_len(&bytes[..len]).unwrap_err(), needs(len, HEADER_SIZE as u64));
+        assert_eq!(MresIndex::parse(&bytes[..len]).unwrap_err(), needs(len, HEADER_SIZE as u64));
+    }
+    let prefix_len = MresIndex::prefix_len(&bytes[..HEADER_SIZE]).unwrap();
+    let first_page = MresFile::parse(bytes.clone()).unwrap().pages[0].offset;
+    assert_eq!(prefix_len, first_page);
+    for len in [HEADER_SIZE, HEADER_SIZE + 1, prefix_len as usize - 1] {
+        assert_eq!(MresIndex::parse(&bytes[..len]).unwrap_err(), needs(len, prefix_len));
+    }
+    assert!(MresIndex::parse(&bytes[..prefix_len as usize]).is_ok());
+    // More than the prefix is fine: the rest is not looked at.
+    assert_eq!(MresIndex::parse(&bytes).unwrap(), MresIndex::parse(&bytes[..prefix_len as usize]).unwrap());
+    // The header is checked before its lengths are trusted.
+    let mut bad = bytes[..HEADER_SIZE].to_vec();
+    bad[0] = b'X';
+    assert_eq!(MresIndex::prefix_len(&bad).unwrap_err(), MresError::BadMagic);
+}
+
+/// The whole-file reader still checks what only it can: the file's length.
+#[test]
+fn the_file_length_must_match_the_page_table() {
+    let bytes = write_mres(&sample_dag(), 3).unwrap();
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(matches!(MresFile::parse(longer.clone()), Err(MresError::Corrupt(ref m)) if m.contains("page data ends")));
+    // The prefix alone cannot know it; the index says where the file should end.
+    assert_eq!(MresIndex::parse(&longer).unwrap().file_size(), bytes.len() as u64);
+    let short = bytes[..bytes.len() - 1].to_vec();
+    assert!(matches!(MresFile::parse(short), Err(MresError::Truncated { ref what, .. }) if what.starts_with("page")));
 }

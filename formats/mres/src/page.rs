@@ -1,0 +1,216 @@
+//! Pages: checking and decompressing a page's bytes (FORMAT.md §4.3) and decoding its clusters
+//! from the GPU layout (§5). The whole-file reader and the page-level API both decode here.
+
+use super::bits::{oct_decode, read_bits};
+use super::read::{corrupt, section, MresError};
+use super::records::ClusterHeader;
+use super::*;
+
+/// One page, checked and decompressed: its bytes in the GPU layout (FORMAT.md §5), uploaded as
+/// is, and the same clusters decoded.
+///
+/// Every cluster of the page has been checked (counts against its record, bit widths, blocks
+/// inside the page, local indices in range), so a renderer may read the bytes through the
+/// headers' offsets without further checks.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Page {
+    /// Page index in the page table.
+    pub index: u32,
+    /// Index of the page's first cluster; cluster `first_cluster + i` has header `headers[i]`
+    /// at byte `i * CLUSTER_HEADER_SIZE` of `bytes`.
+    pub first_cluster: u32,
+    /// The decompressed page.
+    pub bytes: Vec<u8>,
+    /// The cluster headers at the start of `bytes`, one per cluster, in cluster order.
+    pub headers: Vec<ClusterHeader>,
+    /// The clusters decoded: grid positions, normals, UVs, indices and materials.
+    pub clusters: Vec<DecodedCluster>,
+}
+
+/// One decoded cluster.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DecodedCluster {
+    /// Positions on the global grid (decode with [`Grid::decode`]).
+    pub positions: Vec<[i32; 3]>,
+    /// Unit normals (empty without [`FLAG_NORMALS`]).
+    pub normals: Vec<[f32; 3]>,
+    /// UVs (empty without [`FLAG_UVS`]).
+    pub uvs: Vec<[f32; 2]>,
+    /// Local triangle indices.
+    pub indices: Vec<u8>,
+    /// Material per triangle (empty without [`FLAG_MATERIALS`]).
+    pub materials: Vec<u16>,
+}
+
+/// Checks page `p`'s compressed bytes against its table entry (length, then checksum) and
+/// decompresses them to exactly `raw_size` bytes.
+pub(crate) fn decompress_page(info: &PageInfo, p: u32, compressed: &[u8]) -> Result<Vec<u8>, MresError> {
+    if compressed.len() as u64 != info.compressed_size as u64 {
+        return Err(MresError::PageLength { page: p, len: compressed.len() as u64, expected: info.compressed_size });
+    }
+    if blake3::hash(compressed).as_bytes() != &info.checksum {
+        return Err(MresError::Checksum(format!("page {p}")));
+    }
+    // The capacity bounds the output: zstd fails rather than write more than raw_size bytes.
+    let raw = zstd::bulk::decompress(compressed, info.raw_size as usize)
+        .map_err(|e| MresError::Decompress { page: p, problem: e.to_string() })?;
+    if raw.len() != info.raw_size as usize {
+        return Err(MresError::Decompress {
+            page: p,
+            problem: format!("{} bytes, table says {}", raw.len(), info.raw_size),
+        });
+    }
+    Ok(raw)
+}
+
+/// Decompresses page `p` and decodes every cluster in it; `clusters` is the whole file's.
+pub(crate) fn decode_page(
+    header: &Header,
+    clusters: &[ClusterInfo],
+    info: &PageInfo,
+    p: u32,
+    compressed: &[u8],
+) -> Result<Page, MresError> {
+    let bytes = decompress_page(info, p, compressed)?;
+    let first = info.first_cluster as usize;
+    let records = clusters
+        .get(first..first + info.cluster_count as usize)
+        .ok_or_else(|| corrupt(format!("page {p}: cluster range out of range")))?;
+    let mut page = Page {
+        index: p,
+        first_cluster: info.first_cluster,
+        bytes: Vec::new(),
+        headers: Vec::with_capacity(records.len()),
+        clusters: Vec::with_capacity(records.len()),
+    };
+    for (i, record) in records.iter().enumerate() {
+        let (head, cluster) = read_cluster(header, &bytes, record, info.first_cluster + i as u32)?;
+        page.headers.push(head);
+        page.clusters.push(cluster);
+    }
+    page.bytes = bytes;
+    Ok(page)
+}
+
+/// Reads cluster `index` (whose record is `info`) from its decompressed page `raw`: its
+/// header, checked, and its decoded data.
+pub(crate) fn read_cluster(
+    h: &Header,
+    raw: &[u8],
+    info: &ClusterInfo,
+    index: u32,
+) -> Result<(ClusterHeader, DecodedCluster), MresError> {
+    let head = cluster_header(h, raw, info, index)?;
+    let blocks = Blocks { h, raw, head: &head, index };
+    let cluster = DecodedCluster {
+        positions: blocks.positions()?,
+        normals: if h.flags & FLAG_NORMALS != 0 { blocks.normals()? } else { Vec::new() },
+        uvs: if h.flags & FLAG_UVS != 0 { blocks.uvs()? } else { Vec::new() },
+        indices: blocks.indices()?,
+        materials: if h.flags & FLAG_MATERIALS != 0 { blocks.materials()? } else { Vec::new() },
+    };
+    Ok((head, cluster))
+}
+
+/// The header of cluster `index` at its record's `page_offset`, with counts equal to the
+/// record's and bit widths within their limits.
+fn cluster_header(h: &Header, raw: &[u8], info: &ClusterInfo, index: u32) -> Result<ClusterHeader, MresError> {
+    let bytes = section(raw, info.page_offset as u64, CLUSTER_HEADER_SIZE as u64, &format!("cluster {index} header"))?;
+    let bytes = bytes.first_chunk::<CLUSTER_HEADER_SIZE>().ok_or_else(|| corrupt(format!("cluster {index} header")))?;
+    let head = ClusterHeader::decode(bytes);
+    let bad = |what: &str| corrupt(format!("cluster {index}: {what}"));
+    if head.vertex_count != info.vertex_count || head.triangle_count != info.triangle_count {
+        return Err(bad("counts differ from the hierarchy"));
+    }
+    if head.position_bits.iter().any(|&b| b > 32) {
+        return Err(bad("position bit width over 32"));
+    }
+    if h.flags & FLAG_NORMALS != 0 && head.normal_bits.iter().any(|&b| b as u32 > h.normal_bits) {
+        return Err(bad("normal bit width over the header's normal_bits"));
+    }
+    Ok(head)
+}
+
+/// The data blocks of one cluster, each checked to lie inside the page before it is read.
+struct Blocks<'a> {
+    h: &'a Header,
+    raw: &'a [u8],
+    head: &'a ClusterHeader,
+    index: u32,
+}
+
+impl Blocks<'_> {
+    fn bad(&self, what: &str) -> MresError {
+        corrupt(format!("cluster {}: {what}", self.index))
+    }
+
+    /// The `len` bytes of block `slot` (an index of [`ClusterHeader::block_offsets`]).
+    fn block(&self, slot: usize, len: u64, what: &str) -> Result<&[u8], MresError> {
+        let offset = self.head.block_offsets[slot];
+        if offset == 0 {
+            return Err(self.bad(&format!("{what} missing")));
+        }
+        section(self.raw, offset as u64, len, &format!("cluster {} {what}", self.index))
+    }
+
+    fn vertex_count(&self) -> u64 {
+        self.head.vertex_count as u64
+    }
+
+    /// A bit stream of `vertex_count` records of the given field widths (FORMAT.md §5.2).
+    fn bit_records<const N: usize>(&self, slot: usize, bits: [u32; N], what: &str) -> Result<Vec<[u32; N]>, MresError> {
+        let stride: u64 = bits.iter().map(|&b| b as u64).sum();
+        let bytes = self.block(slot, (self.vertex_count() * stride).div_ceil(32) * 4, what)?;
+        let mut out = Vec::with_capacity(self.vertex_count() as usize);
+        for v in 0..self.vertex_count() {
+            let mut at = v * stride;
+            let mut record = [0u32; N];
+            for k in 0..N {
+                record[k] = read_bits(bytes, at, bits[k]).ok_or_else(|| self.bad(what))?;
+                at += bits[k] as u64;
+            }
+            out.push(record);
+        }
+        Ok(out)
+    }
+
+    fn positions(&self) -> Result<Vec<[i32; 3]>, MresError> {
+        let deltas = self.bit_records(ClusterHeader::POSITIONS, self.head.position_bits.map(u32::from), "positions")?;
+        let lo = self.head.position_min;
+        let add = |k: usize, d: u32| i32::try_from(lo[k] as i64 + d as i64);
+        deltas
+            .iter()
+            .map(|d| Ok([add(0, d[0])?, add(1, d[1])?, add(2, d[2])?]))
+            .collect::<Result<_, std::num::TryFromIntError>>()
+            .map_err(|_| self.bad("position overflows i32"))
+    }
+
+    fn normals(&self) -> Result<Vec<[f32; 3]>, MresError> {
+        let lo = self.head.normal_min.map(u32::from);
+        let values = self.bit_records(ClusterHeader::NORMALS, self.head.normal_bits.map(u32::from), "normals")?;
+        Ok(values.iter().map(|q| oct_decode([lo[0] + q[0], lo[1] + q[1]], self.h.normal_bits)).collect())
+    }
+
+    fn uvs(&self) -> Result<Vec<[f32; 2]>, MresError> {
+        let bytes = self.block(ClusterHeader::UVS, self.vertex_count() * 4, "uvs")?;
+        let (quads, _) = bytes.as_chunks::<4>();
+        Ok(quads
+            .iter()
+            .map(|q| self.h.uv.decode([u16::from_le_bytes([q[0], q[1]]), u16::from_le_bytes([q[2], q[3]])]))
+            .collect())
+    }
+
+    fn indices(&self) -> Result<Vec<u8>, MresError> {
+        let indices = self.block(ClusterHeader::INDICES, self.head.triangle_count as u64 * 3, "indices")?;
+        if indices.iter().any(|&i| i as u16 >= self.head.vertex_count) {
+            return Err(self.bad("local index out of range"));
+        }
+        Ok(indices.to_vec())
+    }
+
+    fn materials(&self) -> Result<Vec<u16>, MresError> {
+        let bytes = self.block(ClusterHeader::MATERIALS, self.head.triangle_count as u64 * 2, "materials")?;
+        let (pairs, _) = bytes.as_chunks::<2>();
+        Ok(pairs.iter().map(|&b| u16::from_le_bytes(b)).collect())
+    }
+}
