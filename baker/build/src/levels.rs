@@ -226,7 +226,7 @@ impl<'a> Builder<'a> {
     }
 
     /// Builds levels until nothing is left to group, then makes the root group(s).
-    pub fn to_root(&mut self, progress: Progress) {
+    pub fn build_to_root(&mut self, progress: Progress) {
         while self.step(progress) {}
         self.make_roots();
     }

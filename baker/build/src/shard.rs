@@ -302,7 +302,10 @@ impl ShardContext<'_> {
                 let cell = self.build_shard(source, &spill.path(s), output)?;
                 let (levels, top) = (cell.levels, cell.top.len());
                 let triangles = cell.triangles;
-                progress(&format!("shard {}/{count}: {triangles} triangles, {levels} levels, {top} top clusters", s + 1));
+                progress(&format!(
+                    "shard {}/{count}: {triangles} triangles, {levels} levels, {top} top clusters",
+                    s + 1
+                ));
                 Ok(cell)
             })
             .collect()
@@ -408,7 +411,7 @@ impl ShardContext<'_> {
         let quiet: Progress = &|_| {};
         let mut builder = Builder::new(welded, self.settings, clusters, level);
         if to_root {
-            builder.to_root(quiet);
+            builder.build_to_root(quiet);
         } else {
             loop {
                 let before = builder.pending_triangles() as f64;

@@ -321,4 +321,28 @@ mod tests {
         assert_eq!(w.indices.len(), 6);
         assert_eq!(w.degenerate_dropped, 1);
     }
+
+    #[test]
+    fn grid_welding_merges_copies_by_grid_point() {
+        let mesh = SourceMesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]],
+            normals: Some(vec![[0.0, 0.0, 1.0]; 4]),
+            indices: vec![0, 1, 2, 1, 3, 2],
+            materials: vec![0, 1],
+            ..Default::default()
+        };
+        let settings = BakeSettings::default();
+        let w = weld(&mesh, &settings).unwrap();
+        let all: Vec<u32> = (0..w.grid_positions.len() as u32).collect();
+        let half = w.indices.len() / 2;
+        // Each triangle carried on its own, as two top clusters are.
+        let mut merged = GridMesh { normals: Some(Vec::new()), ..Default::default() };
+        merged.append(&GridMesh::extract(&w, &all, w.indices[..half].to_vec()));
+        merged.append(&GridMesh::extract(&w, &all, w.indices[half..].to_vec()));
+        let again = weld_grid(&merged, &settings, (w.grid, w.uv), w.multi_material);
+        assert_eq!(again.grid_positions, w.grid_positions, "the copies weld back into one vertex each");
+        assert_eq!(again.indices, w.indices);
+        assert_eq!(again.position_count, w.position_count);
+        assert_eq!(again.materials, w.materials);
+    }
 }

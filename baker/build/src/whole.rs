@@ -30,7 +30,7 @@ pub fn build_whole<O: DagOutput>(
     let mut builder = Builder::new(&welded, settings, level0(&welded, settings), 0);
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
-    builder.to_root(progress);
+    builder.build_to_root(progress);
     clock.lap(&mut stats, "levels");
     let mut dag = Collected::new(output);
     let cell = builder.finish(&dag.output)?;
