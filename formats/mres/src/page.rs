@@ -76,20 +76,14 @@ pub(crate) fn decode_page(
     let records = clusters
         .get(first..first + info.cluster_count as usize)
         .ok_or_else(|| corrupt(format!("page {p}: cluster range out of range")))?;
-    let mut page = Page {
-        index: p,
-        first_cluster: info.first_cluster,
-        bytes: Vec::new(),
-        headers: Vec::with_capacity(records.len()),
-        clusters: Vec::with_capacity(records.len()),
-    };
+    let mut headers = Vec::with_capacity(records.len());
+    let mut decoded = Vec::with_capacity(records.len());
     for (i, record) in records.iter().enumerate() {
         let (head, cluster) = read_cluster(header, &bytes, record, info.first_cluster + i as u32)?;
-        page.headers.push(head);
-        page.clusters.push(cluster);
+        headers.push(head);
+        decoded.push(cluster);
     }
-    page.bytes = bytes;
-    Ok(page)
+    Ok(Page { index: p, first_cluster: info.first_cluster, bytes, headers, clusters: decoded })
 }
 
 /// Reads cluster `index` (whose record is `info`) from its decompressed page `raw`: its

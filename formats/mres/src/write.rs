@@ -61,7 +61,25 @@ pub fn write_encoded(
     let frames = compress_pages(&layout, &pages, encoded, level, &mut out)?;
     let table = encode_page_table(&pages, &dependencies, &frames);
 
-    let mut head = HeaderRecord {
+    let sizes = [groups.len(), clusters.len(), pages.len()].map(|n| n as u32);
+    let levels = groups.iter().map(|g| g.level + 1).max().unwrap_or(0);
+    let mut head = header_record(header, levels, sizes, hierarchy.len() as u64, page_table_size);
+    head.meta_checksum = meta_checksum(&head.encode(), &hierarchy, &table);
+    out[..HEADER_SIZE].copy_from_slice(&head.encode());
+    out[HEADER_SIZE..][..hierarchy.len()].copy_from_slice(&hierarchy);
+    out[page_table_offset as usize..][..table.len()].copy_from_slice(&table);
+    Ok(out)
+}
+
+/// The header record of a file with these counts and section sizes; its checksum is left zero.
+fn header_record(
+    header: &Header,
+    level_count: u32,
+    [group_count, cluster_count, page_count]: [u32; 3],
+    hierarchy_size: u64,
+    page_table_size: u64,
+) -> HeaderRecord {
+    HeaderRecord {
         magic: MAGIC,
         version: VERSION,
         header_size: HEADER_SIZE as u32,
@@ -72,23 +90,18 @@ pub fn write_encoded(
         uv_extent: header.uv.extent,
         normal_bits: header.normal_bits,
         position_bits: header.position_bits,
-        level_count: groups.iter().map(|g| g.level + 1).max().unwrap_or(0),
-        group_count: groups.len() as u32,
-        cluster_count: clusters.len() as u32,
-        page_count: pages.len() as u32,
+        level_count,
+        group_count,
+        cluster_count,
+        page_count,
         source_triangles: header.source_triangles,
         hierarchy_offset: HEADER_SIZE as u64,
-        hierarchy_size: hierarchy.len() as u64,
-        page_table_offset,
+        hierarchy_size,
+        page_table_offset: HEADER_SIZE as u64 + hierarchy_size,
         page_table_size,
         meta_checksum: [0; 32],
         reserved: [0; 16],
-    };
-    head.meta_checksum = meta_checksum(&head.encode(), &hierarchy, &table);
-    out[..HEADER_SIZE].copy_from_slice(&head.encode());
-    out[HEADER_SIZE..][..hierarchy.len()].copy_from_slice(&hierarchy);
-    out[page_table_offset as usize..][..table.len()].copy_from_slice(&table);
-    Ok(out)
+    }
 }
 
 /// The groups and cluster records in file order, with their ranges, pages and page offsets
