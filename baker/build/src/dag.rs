@@ -84,9 +84,8 @@ pub struct BuiltDag<O> {
     pub groups: Vec<BuiltGroup>,
     /// Every cluster, as the output converted them.
     pub clusters: O,
-    /// Triangles read, as the file records them (see [`BuiltDag::source_triangles`]).
-    pub file_triangles: u64,
-    /// Triangles in the source, the importer's dropped ones included.
+    /// Input triangles: the source's triangles after triangulation, the ones dropped as
+    /// degenerate (by the importer or later) included; the file header records this.
     pub source_triangles: u64,
     /// Triangles dropped as degenerate (importer, spilling and grid welding).
     pub degenerate_dropped: u64,
@@ -227,12 +226,11 @@ impl<O: DagOutput> Collected<O> {
     }
 
     /// The DAG collected, with the figures its builder adds.
-    pub fn finish(self, frame: Frame, file_triangles: u64, source_triangles: u64, stats: BuildStats) -> BuiltDag<O> {
+    pub fn finish(self, frame: Frame, source_triangles: u64, stats: BuildStats) -> BuiltDag<O> {
         BuiltDag {
             frame,
             groups: self.groups,
             clusters: self.output,
-            file_triangles,
             source_triangles,
             degenerate_dropped: self.degenerate,
             welded_vertices: self.welded_vertices,

@@ -68,7 +68,7 @@ impl DagOutput for Encoder {
 
 /// Writes a built DAG as `.mres` bytes, pages compressed with zstd at `zstd_level`.
 pub fn write(dag: BuiltDag<Encoder>, zstd_level: i32) -> Result<Vec<u8>, BakeError> {
-    let header = dag.clusters.header(&dag.frame, dag.file_triangles);
+    let header = dag.clusters.header(&dag.frame, dag.source_triangles);
     let groups: Vec<Group> = dag.groups.iter().map(group).collect();
     Ok(write_encoded(&header, &groups, dag.clusters.clusters, zstd_level)?)
 }

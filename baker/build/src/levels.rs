@@ -1,6 +1,6 @@
 //! The level loop on one welded mesh: level-0 clusters, then repeatedly group (METIS),
 //! simplify each group in parallel with its border locked, and split the result into parent
-//! clusters (docs/ARCHITECTURE.md "One bake").
+//! clusters (docs/ARCHITECTURE.md "Data flow of one bake").
 //!
 //! The result is independent of the rayon thread count: groups are simplified in parallel but
 //! collected in partition order.

@@ -1,6 +1,6 @@
 //! The DAG builder: open a source, weld, shard if large, cluster, group (METIS), simplify
 //! (meshopt, locked borders), and hand the DAG to the `.mres` writer through `encode`
-//! (`docs/ARCHITECTURE.md` "One bake").
+//! (`docs/ARCHITECTURE.md` "Data flow of one bake").
 #![deny(missing_docs)]
 
 pub mod bake;

@@ -1,23 +1,25 @@
 //! Sharding: a mesh with more than `shard_triangles` triangles is split spatially into shards
 //! that are built one by one (in parallel as threads allow), then merged in the upper levels
-//! into one DAG with one root (docs/ARCHITECTURE.md "One bake").
+//! into one DAG with one root (docs/ARCHITECTURE.md "Large meshes: sharding and streaming
+//! import").
 //!
 //! 1. **Cells.** A k-d tree over (a sample of) the vertex positions, split at medians along
 //!    the longest axis until a cell holds about `shard_triangles` triangles' worth of vertices.
 //! 2. **Spill.** The triangles are streamed (from the OBJ file itself for a streamed import,
 //!    see `mres_import::obj_stream`) and each is appended to its cell's spill file in a
 //!    temporary directory, by centroid. Only the vertex attributes stay in memory.
-//! 3. **Shards.** Each shard is read back, welded on the whole mesh's grid (so that shards
-//!    meet exactly) and built level by level like a whole mesh. Its edges on the shard border
-//!    are open in the shard, so they are locked at every shard level like any open edge. A
-//!    shard stops when a level removes less than [`SHARD_STOP_REDUCTION`] of its triangles
-//!    (what is left is mostly the locked border band) or it is down to a few groups. Its
+//! 3. **Shards (stage 1).** Each shard is read back, welded on the whole mesh's grid (so that
+//!    shards meet exactly) and built [`LEVELS_PER_STAGE`] levels like a whole mesh. Its edges
+//!    on the shard border are open in the shard, so they stay locked for those levels. Its
 //!    finished clusters go to the [`DagOutput`] right away (the `.mres` encoder keeps them
-//!    compact); its top clusters are kept on the grid ([`TopCluster`]).
-//! 4. **Merge.** The top clusters of all shards are welded by their integer grid points into
-//!    one small mesh, where the shard borders are ordinary interior edges, and the level loop
-//!    goes on to one root (in stages of cells while they are many). So no edge stays locked
-//!    for good: a shard border is simplified in the first merged levels.
+//!    compact); its top clusters are kept on the integer grid ([`TopCluster`]).
+//! 4. **Later stages.** The top clusters are cut into new cells whose borders avoid the
+//!    previous stage's (the cut alternates between the 1/3 quantile and the median), each cell
+//!    is welded by integer grid point and built another [`LEVELS_PER_STAGE`] levels, until the
+//!    top fits one merge or a stage removes less than [`SHARD_STOP_REDUCTION`] of its
+//!    triangles. A cell border thus lags the interior by at most [`LEVELS_PER_STAGE`] levels.
+//! 5. **Merge.** What is left is welded into one mesh and the level loop goes on to one root.
+//!    So no edge stays locked for good: every shard border is simplified in a later stage.
 //!
 //! Peak memory is the vertex attributes (12–32 bytes per vertex), the encoded clusters (about
 //! the size of the output), and the working set of the shards being built — not the whole
@@ -91,12 +93,12 @@ pub fn build_sharded<S: TriangleSource, O: DagOutput>(
     let left = dag.collect(vec![last], &mut stats);
     debug_assert!(left.is_empty());
     clock.lap(&mut stats, "merge");
-    // What the file records excludes the triangles an in-memory source's importer dropped
-    // (the figures include them); kept so for byte-identical output.
-    let file_triangles = kept + degenerate;
+    // Input triangles include the ones an in-memory source's importer dropped, as in a whole
+    // build (files baked before BAKER_VERSION 4 recorded kept + spill-dropped only).
+    let source_triangles = kept + degenerate + importer_dropped;
     dag.degenerate += degenerate + importer_dropped;
     let frame = Frame { grid: grid.0, uv: grid.1, normals: keep_normals, uvs: keep_uvs, multi_material };
-    Ok(dag.finish(frame, file_triangles, file_triangles + importer_dropped, stats))
+    Ok(dag.finish(frame, source_triangles, stats))
 }
 
 fn spill_error(e: std::io::Error) -> BakeError {

@@ -38,5 +38,5 @@ pub fn build_whole<O: DagOutput>(
     dag.welded_vertices = welded.positions.len() as u64;
     dag.degenerate = welded.degenerate_dropped;
     clock.lap(&mut stats, "encode");
-    Ok(dag.finish(Frame::of(&welded), welded.source_triangles, source_triangles, stats))
+    Ok(dag.finish(Frame::of(&welded), source_triangles, stats))
 }

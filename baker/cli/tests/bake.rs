@@ -1,4 +1,4 @@
-//! End-to-end bakes (issue #2): generated and real meshes are baked, then proved by the
+//! End-to-end bakes: generated and real meshes are baked, then proved by the
 //! validator — crack-free cuts at every uniform threshold and at random cameras, monotone
 //! errors, nested spheres, intact pages — with one root.
 

@@ -1,4 +1,4 @@
-//! Sharded bakes (issue #3): one DAG with one root, crack-free across shard borders, shard
+//! Sharded bakes: one DAG with one root, crack-free across shard borders, shard
 //! borders simplified above the shards, deterministic for any thread count, and the same
 //! bytes whether the OBJ is streamed from the file or imported whole.
 
@@ -92,4 +92,20 @@ fn sharded_output_is_identical_for_any_thread_count_and_streamed_or_whole() {
     let whole = mres_import::import_file(&path, &Default::default()).unwrap();
     assert_eq!(one.bytes, bake(whole, &settings).0);
     check(one.bytes);
+}
+
+/// "Input triangles" means the same whole or sharded: the file header counts the triangles an
+/// in-memory source's importer dropped as degenerate, as a whole bake's does.
+#[test]
+fn sharded_header_counts_the_importers_dropped_triangles_like_a_whole_bake() {
+    let mut mesh = generate::sphere(30);
+    mesh.degenerate_dropped = 7;
+    let input = mesh.triangle_count() as u64 + 7;
+    let (whole, _) = bake(mesh.clone(), &BakeSettings::default());
+    let (bytes, shards) = bake(mesh, &sharded(3000));
+    assert!(shards >= 2, "{shards} shards");
+    let whole = MresFile::parse(whole).expect("whole bake parses");
+    let sharded = MresFile::parse(bytes).expect("sharded bake parses");
+    assert_eq!(whole.header.source_triangles, input);
+    assert_eq!(sharded.header.source_triangles, input);
 }

@@ -1,4 +1,4 @@
-//! `bake-all`: bake every OBJ/glTF/GLB under a directory into `.mres` files, in parallel,
+//! `bake-all`: bake every OBJ/glTF/GLB/PLY under a directory into `.mres` files, in parallel,
 //! skipping what the content-addressed cache already holds.
 
 use anyhow::{Context, Result};
@@ -19,8 +19,8 @@ use std::time::Instant;
 #[command(
     name = "bake-all",
     version,
-    about = "Bake every OBJ, glTF and GLB under a directory into .mres cluster-DAG files",
-    long_about = "Bake every OBJ, glTF and GLB under a directory into .mres cluster-DAG files.\n\n\
+    about = "Bake every OBJ, glTF, GLB and PLY under a directory into .mres cluster-DAG files",
+    long_about = "Bake every OBJ, glTF, GLB and PLY under a directory into .mres cluster-DAG files.\n\n\
         Assets bake in parallel; each one is looked up first in a content-addressed cache keyed by its bytes, \
         the files it references, its effective settings and the format and baker versions, so an unchanged tree \
         bakes nothing.\n\n\

@@ -112,7 +112,7 @@ struct ExportArgs {
 
 #[derive(Args)]
 struct BenchArgs {
-    /// Mesh file (OBJ, glTF, GLB).
+    /// Mesh file (OBJ, glTF, GLB, PLY).
     input: PathBuf,
     /// Runs per builder; the minimum time and RSS are reported.
     #[arg(long, default_value_t = 1, value_name = "N")]
