@@ -223,7 +223,7 @@ pub(super) fn referenced_files(path: &Path, bytes: &[u8]) -> KindResult<Vec<Path
         }
     };
     let text = text(bytes)?;
-    for line in Cursor::new(text.trim_start_matches(BOM)).lines() {
+    for line in Cursor::new(text.strip_prefix(BOM).unwrap_or(text)).lines() {
         let line = line.map_err(ImportErrorKind::Io)?;
         if line.split_whitespace().next() != Some("mtllib") {
             continue;
