@@ -154,6 +154,9 @@ impl ObjVertices {
     }
 }
 
+/// The UTF-8 byte-order mark.
+const BOM: &[u8] = "\u{feff}".as_bytes();
+
 /// Calls `f` with each line (1-based number, text without the line end) of the file.
 fn for_each_line(path: &Path, mut f: impl FnMut(usize, &str) -> KindResult<()>) -> KindResult<()> {
     let file = File::open(path).map_err(ImportErrorKind::Io)?;
@@ -166,13 +169,14 @@ fn for_each_line(path: &Path, mut f: impl FnMut(usize, &str) -> KindResult<()>) 
             return Ok(());
         }
         line_no += 1;
-        let mut line = std::str::from_utf8(&buffer)
-            .map_err(|e| parse_error(line_no, &format!("not UTF-8 text (at byte {} of the line)", e.valid_up_to())))?;
-        if line_no == 1 {
-            // One byte-order mark, as the whole-file importer strips: a second one is part of
-            // the first word, which makes the line one neither reader knows (found by fuzzing).
-            line = line.strip_prefix('\u{feff}').unwrap_or(line);
+        if line_no == 1 && buffer.starts_with(BOM) {
+            // One byte-order mark, blanked as the whole-file importer blanks it (so that
+            // "\u{feff}usemtl" reads as "   usemtl" in both); a second one is part of the first
+            // word, which makes the line one neither reader knows (both found by fuzzing).
+            buffer[..BOM.len()].fill(b' ');
         }
+        let line = std::str::from_utf8(&buffer)
+            .map_err(|e| parse_error(line_no, &format!("not UTF-8 text (at byte {} of the line)", e.valid_up_to())))?;
         f(line_no, line)?;
     }
 }
