@@ -59,6 +59,7 @@
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod bits;
+pub mod error;
 pub mod page;
 pub mod read;
 pub mod records;

@@ -2,7 +2,7 @@
 //! from the GPU layout (§5). The whole-file reader and the page-level API both decode here.
 
 use super::bits::{oct_decode, read_bits};
-use super::read::{corrupt, section, MresError};
+use super::error::{corrupt, section, MresError};
 use super::records::ClusterHeader;
 use super::*;
 

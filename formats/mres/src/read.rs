@@ -4,63 +4,12 @@
 //! length, reference and checksum is checked before use; corrupt input gives a typed
 //! [`MresError`], never a panic.
 
+pub use super::error::MresError;
+use super::error::{corrupt, section};
 use super::page::{decode_page, decompress_page, read_cluster, Page};
 use super::records::{meta_checksum, ClusterRecord, GroupRecord, HeaderRecord, PageRecord};
 use super::*;
 use std::ops::Range;
-
-/// What is wrong with a `.mres` file.
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum MresError {
-    /// The file ends before a section it declares.
-    #[error("truncated: {what} needs bytes {start}..{end} but the file has {len}")]
-    Truncated {
-        /// The section.
-        what: String,
-        /// First byte needed.
-        start: u64,
-        /// One past the last byte needed.
-        end: u64,
-        /// File length.
-        len: u64,
-    },
-    /// The file could not be read.
-    #[error("{0}")]
-    Io(String),
-    /// Not a `.mres` file.
-    #[error("not a .mres file (bad magic)")]
-    BadMagic,
-    /// A version this reader does not know.
-    #[error("unsupported .mres version {found} (this reader reads version {VERSION})")]
-    WrongVersion {
-        /// Version in the file.
-        found: u32,
-    },
-    /// A checksum does not match.
-    #[error("checksum mismatch in {0}")]
-    Checksum(String),
-    /// A value or reference is out of range or inconsistent.
-    #[error("corrupt {0}")]
-    Corrupt(String),
-    /// The bytes given for a page are not as long as the page table says.
-    #[error("page {page}: {len} compressed bytes given, the page table says {expected}")]
-    PageLength {
-        /// Page index.
-        page: u32,
-        /// Bytes given.
-        len: u64,
-        /// `compressed_size` in the page table.
-        expected: u32,
-    },
-    /// A page does not decompress to its declared size.
-    #[error("page {page}: {problem}")]
-    Decompress {
-        /// Page index.
-        page: u32,
-        /// What went wrong.
-        problem: String,
-    },
-}
 
 /// The resident part of a `.mres` file — header, hierarchy and page table — parsed and checked
 /// from a prefix of the file, for a streamer that fetches pages itself.
@@ -237,23 +186,10 @@ impl MresFile {
     }
 }
 
-/// Returns `bytes[start..start+len]` or a `Truncated` error naming `what`.
-pub(crate) fn section<'a>(bytes: &'a [u8], start: u64, len: u64, what: &str) -> Result<&'a [u8], MresError> {
-    let end = start.saturating_add(len);
-    if end > bytes.len() as u64 {
-        return Err(MresError::Truncated { what: what.into(), start, end, len: bytes.len() as u64 });
-    }
-    Ok(&bytes[start as usize..end as usize])
-}
-
 /// `bytes` split after `len` bytes, or a `Truncated` error naming `what` (the first part).
 fn split<'a>(bytes: &'a [u8], len: u64, what: &str) -> Result<(&'a [u8], &'a [u8]), MresError> {
     let first = section(bytes, 0, len, what)?;
     Ok((first, &bytes[first.len()..]))
-}
-
-pub(crate) fn corrupt(msg: String) -> MresError {
-    MresError::Corrupt(msg)
 }
 
 fn page_info(pages: &[PageInfo], p: u32) -> Result<&PageInfo, MresError> {
