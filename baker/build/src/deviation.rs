@@ -119,7 +119,8 @@ pub fn assign_owned(mesh: &WeldedMesh, owned: &[u32], children: &[Vec<u32>]) -> 
     let point = |v: u32| mesh.positions[v as usize];
     let tris: Vec<Triangle<f32>> =
         children.iter().flat_map(|c| c.chunks_exact(3).map(|t| [point(t[0]), point(t[1]), point(t[2])])).collect();
-    let child_of: Vec<usize> = children.iter().enumerate().flat_map(|(i, c)| std::iter::repeat_n(i, c.len() / 3)).collect();
+    let child_of: Vec<usize> =
+        children.iter().enumerate().flat_map(|(i, c)| std::iter::repeat_n(i, c.len() / 3)).collect();
     let bvh = Bvh::new(&tris);
     let mut out = vec![Vec::new(); children.len()];
     let mut hint = usize::MAX;

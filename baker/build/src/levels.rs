@@ -9,11 +9,11 @@ use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopCluster, LOCAL};
 use crate::deviation::{assign_owned, part_sizes, simplify_measured, Reference};
 use crate::error::BakeError;
+use crate::open;
 use crate::partition::{cluster_graph, partition};
 use crate::progress::Progress;
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Method};
-use crate::open;
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
 use mres_geom::edges::sorted_edge_keys;
@@ -96,17 +96,7 @@ impl<'a> Builder<'a> {
         };
         let pending = (0..clusters.len()).collect();
         let stats = BuildStats::default();
-        Builder {
-            mesh,
-            settings,
-            always_locked,
-            part_size,
-            clusters,
-            groups: Vec::new(),
-            pending,
-            level,
-            stats,
-        }
+        Builder { mesh, settings, always_locked, part_size, clusters, groups: Vec::new(), pending, level, stats }
     }
 
     /// Triangles in the pending clusters.
@@ -200,7 +190,11 @@ impl<'a> Builder<'a> {
                 };
                 let indices = split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings);
                 let open = open::mark(mesh, &indices, &s.needed);
-                let owned = if owned.is_empty() { vec![Vec::new(); indices.len()] } else { assign_owned(mesh, &owned, &indices) };
+                let owned = if owned.is_empty() {
+                    vec![Vec::new(); indices.len()]
+                } else {
+                    assign_owned(mesh, &owned, &indices)
+                };
                 let children = indices
                     .into_iter()
                     .zip(open)
@@ -343,17 +337,21 @@ fn always_locked(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<u8> {
     let (mut edges, mut marked): (Vec<u64>, Vec<u64>) = clusters
         .par_iter()
         .map(|c| (sorted_edge_keys(&c.indices, id), open::marked_edges(mesh, &c.indices, &c.open)))
-        .reduce(|| (Vec::new(), Vec::new()), |mut a, b| {
-            a.0.extend(b.0);
-            a.1.extend(b.1);
-            a
-        });
+        .reduce(
+            || (Vec::new(), Vec::new()),
+            |mut a, b| {
+                a.0.extend(b.0);
+                a.1.extend(b.1);
+                a
+            },
+        );
     edges.par_sort_unstable();
     marked.par_sort_unstable();
     let mut locked = vec![0u8; mesh.position_count];
     for run in edges.chunk_by(|a, b| a == b) {
         let marks = marked.partition_point(|&m| m <= run[0]) - marked.partition_point(|&m| m < run[0]);
-        let why = if (run.len() - marks) % 2 == 1 { CELL_BORDER } else { 0 } | if run.len() >= 3 { NON_MANIFOLD } else { 0 };
+        let why =
+            if (run.len() - marks) % 2 == 1 { CELL_BORDER } else { 0 } | if run.len() >= 3 { NON_MANIFOLD } else { 0 };
         locked[(run[0] >> 32) as usize] |= why;
         locked[(run[0] & 0xffff_ffff) as usize] |= why;
     }
