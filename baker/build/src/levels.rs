@@ -7,7 +7,7 @@
 
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopCluster, LOCAL};
-use crate::deviation::{assign_owned, part_sizes, simplify_measured, Reference};
+use crate::deviation::{assign_owned, part_sizes, simplify_measured, Original, Reference};
 use crate::error::BakeError;
 use crate::open;
 use crate::partition::{cluster_graph, partition};
@@ -72,6 +72,9 @@ pub(crate) struct Builder<'a> {
     /// Per position id: why it is locked at every level ([`CELL_BORDER`], [`NON_MANIFOLD`]
     /// bits; see `always_locked`).
     always_locked: Vec<u8>,
+    /// The whole level-0 surface, when the pending clusters started at level 0 and errors are
+    /// measured (see `deviation::Original`).
+    original: Option<Original>,
     /// Per position id, the size of its connected part (see `deviation::part_sizes`).
     part_size: Vec<f32>,
     /// Every cluster built so far, in creation order.
@@ -94,9 +97,22 @@ impl<'a> Builder<'a> {
             ErrorBound::Measured => part_sizes(mesh),
             ErrorBound::Simplifier => Vec::new(),
         };
+        let from_level0 = clusters.iter().all(|c| c.own_group == NO_GROUP && !c.owned.is_empty());
+        let original = (settings.error_bound == ErrorBound::Measured && from_level0).then(|| Original::new(mesh));
         let pending = (0..clusters.len()).collect();
         let stats = BuildStats::default();
-        Builder { mesh, settings, always_locked, part_size, clusters, groups: Vec::new(), pending, level, stats }
+        Builder {
+            mesh,
+            settings,
+            always_locked,
+            original,
+            part_size,
+            clusters,
+            groups: Vec::new(),
+            pending,
+            level,
+            stats,
+        }
     }
 
     /// Triangles in the pending clusters.
@@ -175,10 +191,11 @@ impl<'a> Builder<'a> {
                         let reference = if owned.is_empty() {
                             // Against the members, each with its own error (a later shard stage).
                             let errors = members().flat_map(|m| std::iter::repeat_n(m.own_error, m.indices.len() / 3));
-                            Reference { triangles: &merged, errors: errors.collect(), members_error }
+                            Reference { triangles: &merged, errors: errors.collect(), members_error, original: None }
                         } else {
                             // Against the original surface under the group: nothing adds up.
-                            Reference { triangles: &owned, errors: vec![0.0; owned.len() / 3], members_error }
+                            let errors = vec![0.0; owned.len() / 3];
+                            Reference { triangles: &owned, errors, members_error, original: self.original.as_ref() }
                         };
                         simplify_measured(mesh, &merged, &masks, &reference, locked, settings, part_size)?
                     }
