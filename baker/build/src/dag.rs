@@ -35,9 +35,10 @@ pub struct BuiltCluster {
     pub group: u32,
     /// Open-border marks, one 3-bit mask per triangle (see [`crate::open`]).
     pub open: Vec<u8>,
-    /// The level-0 triangles (welded vertex ids) this cluster stands for, while the builder
-    /// measures errors against the original surface (`deviation`); emptied once grouped.
-    pub owned: Vec<u32>,
+    /// The level-0 sample points this cluster stands for, while the builder measures errors
+    /// against the original surface: (level-0 triangle in welded vertex ids, the bits of its
+    /// samples it owns, see `deviation::Owned`); emptied once grouped.
+    pub owned: Vec<crate::deviation::Owned>,
 }
 
 /// Receives the finished clusters of each welded mesh the DAG is built on, while that mesh

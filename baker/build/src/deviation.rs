@@ -17,7 +17,7 @@
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Simplified};
 use crate::weld::WeldedMesh;
-use mres_geom::bvh::{Bvh, Triangle};
+use mres_geom::bvh::{point_triangle_distance2, Bvh, Triangle};
 use mres_geom::edges::edge_key;
 use mres_geom::parts::{diagonals, UnionFind};
 
@@ -54,9 +54,12 @@ pub fn part_sizes(mesh: &WeldedMesh) -> Vec<f32> {
 /// triangles, each with its member's error.
 pub struct Reference<'a> {
     /// Triangle list in welded vertex ids.
-    pub triangles: &'a [u32],
+    pub triangles: std::borrow::Cow<'a, [u32]>,
     /// Per triangle, the error of the surface it stands for.
     pub errors: Vec<f32>,
+    /// Per triangle, which of its samples belong to this group (see [`Owned`]); all when
+    /// `None`.
+    pub samples: Option<Vec<u8>>,
     /// The largest own error among the group's members: the stored error is at least this
     /// (monotone errors), and the outlier test counts only what the step adds beyond it.
     pub members_error: f32,
@@ -79,10 +82,10 @@ pub fn simplify_measured(
     settings: &BakeSettings,
     part_size: &[f32],
 ) -> Option<(Simplified, f32)> {
-    let (members, triangles, errors) = (reference.members_error, reference.triangles, &reference.errors);
+    let (members, triangles, errors) = (reference.members_error, &reference.triangles[..], &reference.errors);
+    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.samples.as_deref() };
     let error_of = |s: &Simplified, hot_above: Option<f64>| {
-        let (total, hot) =
-            measure(mesh, triangles, errors, &s.indices, part_size, s.error as f64, hot_above, reference.original);
+        let (total, hot) = measure(mesh, &sides, &s.indices, part_size, s.error as f64, hot_above, reference.original);
         (stored(total, s.error).max(members), hot)
     };
     let mut best = simplify_group(mesh, input, masks, &locked, settings)?;
@@ -115,24 +118,75 @@ pub fn simplify_measured(
     Some((best, error))
 }
 
-/// Hands each triangle of `owned` (level-0 triangles, welded ids) to the cluster of
-/// `children` that holds the output triangle nearest to its centroid: the next level measures
-/// it against that cluster's group. Every level-0 triangle thus stays under exactly one
-/// pending cluster, and a group's reference is the original surface its members replace.
-pub fn assign_owned(mesh: &WeldedMesh, owned: &[u32], children: &[Vec<u32>]) -> Vec<Vec<u32>> {
+/// A level-0 triangle (welded vertex ids) and the bits of its samples a cluster stands for:
+/// corner k (bit k), the midpoint of edge k from corner k (bit 3 + k), the centroid (bit 6).
+pub type Owned = ([u32; 3], u8);
+
+/// Every sample of a triangle.
+pub const ALL_SAMPLES: u8 = 0x7f;
+
+/// The level-0 samples of a group's members, one entry per triangle (bits of one triangle
+/// owned by several members are joined), sorted.
+pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
+    let mut all: Vec<Owned> = owned.collect();
+    all.sort_unstable();
+    let mut out: Vec<Owned> = Vec::with_capacity(all.len());
+    for (t, bits) in all {
+        match out.last_mut() {
+            Some(last) if last.0 == t => last.1 |= bits,
+            _ => out.push((t, bits)),
+        }
+    }
+    out
+}
+
+/// The sample point of bit `b` of triangle `t` (see [`Owned`]).
+fn sample_point(t: &Triangle<f32>, b: usize) -> [f32; 3] {
+    match b {
+        0..=2 => t[b],
+        3..=5 => [0, 1, 2].map(|k| (t[b - 3][k] + t[(b - 2) % 3][k]) * 0.5),
+        _ => [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) * (1.0 / 3.0)),
+    }
+}
+
+/// Hands each level-0 sample of `owned` to a cluster of `children` (a group's output, whose
+/// stored error is `error`) within `error` of it, the one nearest to the triangle's centroid
+/// when that is close enough: the next level measures the sample against that cluster's group.
+/// A sample must go to a cluster near itself, not just near its triangle: where a group border
+/// later runs between two clusters, a level-0 triangle can straddle it, and its far corner
+/// would be measured across the border. Every sample stays under exactly one pending cluster.
+pub fn assign_owned(mesh: &WeldedMesh, owned: &[Owned], children: &[Vec<u32>], error: f32) -> Vec<Vec<Owned>> {
     let point = |v: u32| mesh.positions[v as usize];
     let tris: Vec<Triangle<f32>> =
         children.iter().flat_map(|c| c.chunks_exact(3).map(|t| [point(t[0]), point(t[1]), point(t[2])])).collect();
     let child_of: Vec<usize> =
         children.iter().enumerate().flat_map(|(i, c)| std::iter::repeat_n(i, c.len() / 3)).collect();
     let bvh = Bvh::new(&tris);
+    let close2 = error * error;
     let mut out = vec![Vec::new(); children.len()];
     let mut hint = usize::MAX;
-    for t in owned.chunks_exact(3) {
-        let c = [0, 1, 2].map(|k| (point(t[0])[k] + point(t[1])[k] + point(t[2])[k]) * (1.0 / 3.0));
-        let (_, nearest) = bvh.nearest_squared(&tris, c, 0.0, hint);
-        hint = nearest;
-        out[child_of[nearest]].extend_from_slice(t);
+    let mut bits = vec![0u8; children.len()];
+    for &(t, mask) in owned {
+        let tri = t.map(point);
+        let (_, near) = bvh.nearest_squared(&tris, sample_point(&tri, 6), 0.0, hint);
+        hint = near;
+        let mut touched: Vec<usize> = Vec::new();
+        for b in (0..7).filter(|b| mask >> b & 1 != 0) {
+            let p = sample_point(&tri, b);
+            let nearest = if point_triangle_distance2(p, &tris[near]) <= close2 {
+                near
+            } else {
+                bvh.nearest_squared(&tris, p, close2, near).1
+            };
+            let c = child_of[nearest];
+            if bits[c] == 0 {
+                touched.push(c);
+            }
+            bits[c] |= 1 << b;
+        }
+        for c in touched {
+            out[c].push((t, std::mem::take(&mut bits[c])));
+        }
     }
     out
 }
@@ -149,8 +203,17 @@ pub fn group_error(
     simplifier_error: f32,
 ) -> f32 {
     let errors = vec![members_error; input.len() / 3];
-    let (total, _) = measure(mesh, input, &errors, output, part_size, simplifier_error as f64, None, None);
+    let sides = Sides { input, triangle_errors: &errors, owned: None };
+    let (total, _) = measure(mesh, &sides, output, part_size, simplifier_error as f64, None, None);
     stored(total, simplifier_error).max(members_error)
+}
+
+/// The reference side of a measurement: triangles (welded ids), each one's member error, and
+/// optionally which of each one's samples to measure.
+struct Sides<'a> {
+    input: &'a [u32],
+    triangle_errors: &'a [f32],
+    owned: Option<&'a [u8]>,
 }
 
 /// The whole level-0 surface of a welded mesh, in object coordinates, for measuring output
@@ -212,14 +275,14 @@ fn stored(total: f64, simplifier_error: f32) -> f32 {
 #[allow(clippy::too_many_arguments)]
 fn measure(
     mesh: &WeldedMesh,
-    input: &[u32],
-    triangle_errors: &[f32],
+    sides: &Sides,
     output: &[u32],
     part_size: &[f32],
     floor: f64,
     hot_above: Option<f64>,
     original: Option<&Original>,
 ) -> (f64, Vec<u32>) {
+    let (input, triangle_errors) = (sides.input, sides.triangle_errors);
     let id = |v: u32| mesh.position_ids[v as usize];
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for &v in input {
@@ -241,7 +304,12 @@ fn measure(
         indices.chunks_exact(3).map(|t| [local(t[0]), local(t[1]), local(t[2])]).collect()
     };
     let (input_tris, output_tris) = (triangles(input), triangles(output));
-    let (input_duty, output_duty) = duties(mesh, input, output, triangle_errors);
+    let (mut input_duty, output_duty) = duties(mesh, input, output, triangle_errors, sides.owned.is_some());
+    if let Some(owned) = sides.owned {
+        for (d, o) in input_duty.iter_mut().zip(owned) {
+            *d &= o;
+        }
+    }
 
     let hot2 = hot_above.map(|h| (h * h) as f32);
     let largest = triangle_errors.iter().copied().fold(0.0f32, f32::max) as f64;
@@ -349,7 +417,16 @@ fn measure(
 /// triangle both have) is at distance 0 and left out; a corner or edge that several triangles
 /// share is measured by one of them only: the first of those with the largest member error
 /// (`triangle_errors`, per input triangle).
-fn duties(mesh: &WeldedMesh, input: &[u32], output: &[u32], triangle_errors: &[f32]) -> (Vec<u8>, Vec<u8>) {
+///
+/// With `every_slot`, input samples that several triangles share are marked on all of them
+/// (the caller then keeps only the samples each triangle owns).
+fn duties(
+    mesh: &WeldedMesh,
+    input: &[u32],
+    output: &[u32],
+    triangle_errors: &[f32],
+    every_slot: bool,
+) -> (Vec<u8>, Vec<u8>) {
     let id = |v: u32| mesh.position_ids[v as usize];
     // (key, slot = 3 × triangle + corner), sorted: equal keys are adjacent, first slot first.
     let edges = |indices: &[u32]| -> Vec<(u64, u32)> {
@@ -383,7 +460,7 @@ fn duties(mesh: &WeldedMesh, input: &[u32], output: &[u32], triangle_errors: &[f
         a: &[(K, u32)],
         b: &[(K, u32)],
         duty: &mut [u8],
-        rank: impl Fn(u32) -> f32,
+        (rank, every): (impl Fn(u32) -> f32, bool),
         bit: impl Fn(u32) -> (usize, u8),
     ) {
         let mut j = 0;
@@ -392,6 +469,13 @@ fn duties(mesh: &WeldedMesh, input: &[u32], output: &[u32], triangle_errors: &[f
                 j += 1;
             }
             if j >= b.len() || b[j].0 != run[0].0 {
+                if every {
+                    for x in run {
+                        let (t, m) = bit(x.1);
+                        duty[t] |= m;
+                    }
+                    continue;
+                }
                 let slot = run.iter().map(|x| x.1).fold(run[0].1, |s, x| if rank(x) > rank(s) { x } else { s });
                 let (t, m) = bit(slot);
                 duty[t] |= m;
@@ -408,11 +492,12 @@ fn duties(mesh: &WeldedMesh, input: &[u32], output: &[u32], triangle_errors: &[f
     let by_slot = |s: u32| triangle_errors[s as usize / 3];
     let by_triangle = |t: u32| triangle_errors[t as usize];
     let none = |_: u32| 0.0;
-    mark(&corners(input), &corners(output), &mut input_duty, by_slot, corner);
-    mark(&input_edges, &output_edges, &mut input_duty, by_slot, edge);
-    mark(&input_keys, &output_keys, &mut input_duty, by_triangle, whole);
-    mark(&output_edges, &input_edges, &mut output_duty, none, edge);
-    mark(&output_keys, &input_keys, &mut output_duty, none, whole);
+    let all = every_slot;
+    mark(&corners(input), &corners(output), &mut input_duty, (by_slot, all), corner);
+    mark(&input_edges, &output_edges, &mut input_duty, (by_slot, all), edge);
+    mark(&input_keys, &output_keys, &mut input_duty, (by_triangle, all), whole);
+    mark(&output_edges, &input_edges, &mut output_duty, (none, false), edge);
+    mark(&output_keys, &input_keys, &mut output_duty, (none, false), whole);
     (input_duty, output_duty)
 }
 

@@ -7,7 +7,9 @@
 
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopCluster, LOCAL};
-use crate::deviation::{assign_owned, part_sizes, simplify_measured, Original, Reference};
+use crate::deviation::{
+    assign_owned, merge_owned, part_sizes, simplify_measured, Original, Owned, Reference, ALL_SAMPLES,
+};
 use crate::error::BakeError;
 use crate::open;
 use crate::partition::{cluster_graph, partition};
@@ -18,6 +20,7 @@ use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
 use mres_geom::edges::sorted_edge_keys;
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 /// Most clusters the final root group may hold. A mesh whose coarsest clusters cannot be
 /// simplified further (an open boundary is locked in every cut) ends in one root group of up
@@ -45,7 +48,7 @@ struct Simplified {
 struct Child {
     indices: Vec<u32>,
     open: Vec<u8>,
-    owned: Vec<u32>,
+    owned: Vec<Owned>,
 }
 
 /// Level-0 clusters of a welded mesh, with their own bounds; the edges of `open` (sorted
@@ -58,7 +61,7 @@ pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64]) -
         .zip(marks)
         .map(|(indices, open)| {
             let own_sphere = bounding_sphere(&indices, &mesh.positions);
-            let owned = indices.clone();
+            let owned = indices.chunks_exact(3).map(|t| ([t[0], t[1], t[2]], ALL_SAMPLES)).collect();
             BuiltCluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP, open, owned }
         })
         .collect()
@@ -185,17 +188,30 @@ impl<'a> Builder<'a> {
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
                 let masks: Vec<u8> = members().flat_map(|m| m.open.iter().copied()).collect();
                 let members_error = members().map(|m| m.own_error).fold(0.0, f32::max);
-                let owned: Vec<u32> = members().flat_map(|m| m.owned.iter().copied()).collect();
+                let owned = match settings.error_bound {
+                    ErrorBound::Measured => merge_owned(members().flat_map(|m| m.owned.iter().copied())),
+                    ErrorBound::Simplifier => Vec::new(),
+                };
                 let (s, error) = match settings.error_bound {
                     ErrorBound::Measured => {
                         let reference = if owned.is_empty() {
                             // Against the members, each with its own error (a later shard stage).
                             let errors = members().flat_map(|m| std::iter::repeat_n(m.own_error, m.indices.len() / 3));
-                            Reference { triangles: &merged, errors: errors.collect(), members_error, original: None }
+                            let triangles = Cow::Borrowed(merged.as_slice());
+                            Reference {
+                                triangles,
+                                errors: errors.collect(),
+                                samples: None,
+                                members_error,
+                                original: None,
+                            }
                         } else {
                             // Against the original surface under the group: nothing adds up.
-                            let errors = vec![0.0; owned.len() / 3];
-                            Reference { triangles: &owned, errors, members_error, original: self.original.as_ref() }
+                            let errors = vec![0.0; owned.len()];
+                            let samples = Some(owned.iter().map(|o| o.1).collect());
+                            let triangles: Vec<u32> = owned.iter().flat_map(|o| o.0).collect();
+                            let original = self.original.as_ref();
+                            Reference { triangles: Cow::Owned(triangles), errors, samples, members_error, original }
                         };
                         simplify_measured(mesh, &merged, &masks, &reference, locked, settings, part_size)?
                     }
@@ -210,7 +226,7 @@ impl<'a> Builder<'a> {
                 let owned = if owned.is_empty() {
                     vec![Vec::new(); indices.len()]
                 } else {
-                    assign_owned(mesh, &owned, &indices)
+                    assign_owned(mesh, &owned, &indices, error)
                 };
                 let children = indices
                     .into_iter()
