@@ -296,7 +296,7 @@ pub fn triangles_at(points: &[(f64, u64)], target: f64) -> Option<f64> {
     let i = envelope.iter().rposition(|p| p.0 <= target)?;
     let (e0, t0) = envelope[i];
     let Some(&(e1, t1)) = envelope.get(i + 1) else { return Some(t0 as f64) };
-    if e0 <= 0.0 || t1 == 0 {
+    if e0 <= 0.0 || t1 == 0 || target == e0 {
         return Some(t0 as f64);
     }
     let f = (target.ln() - e0.ln()) / (e1.ln() - e0.ln());
