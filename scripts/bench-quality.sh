@@ -24,11 +24,12 @@ if [ -z "${MRES:-}" ]; then
 fi
 command -v jq >/dev/null || { echo "bench-quality.sh: needs jq" >&2; exit 2; }
 [ -d "$mesh_dir" ] || { echo "bench-quality.sh: $mesh_dir is not a directory" >&2; exit 2; }
-mkdir -p "$out/generated"
+mkdir -p "$out"
 
 # Generated cases of moderate size (scripts/generate-cases.sh writes larger ones; pass its
 # directory as MESH_DIR to bench those).
 if [ "$generated" != 0 ]; then
+  mkdir -p "$out/generated"
   g() { [ -s "$out/generated/$3" ] || "$MRES" generate "$1" "$2" -o "$out/generated/$3" >/dev/null; }
   g sphere 64 sphere-49k.obj
   g terrain 160 terrain-51k.obj
