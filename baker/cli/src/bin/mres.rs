@@ -47,7 +47,9 @@ enum Command {
     /// view-dependent cut seen from a camera at a pixel threshold.
     Export(ExportArgs),
     /// Bake INPUT with mres and with meshoptimizer's clusterlod (each in its own child process)
-    /// and compare time, peak memory and quality.
+    /// and compare time, peak memory and quality: the triangles each needs at equal measured
+    /// distance to the input (mean and max, over uniform cuts; docs/BENCHMARKS.md, "Quality at
+    /// equal measured error").
     Bench(BenchArgs),
     /// Maintain the bake cache of `bake-all`.
     Cache(CacheArgs),
