@@ -7,6 +7,7 @@
 #![deny(missing_docs)]
 
 pub mod conditioning;
+pub mod distance;
 pub mod honesty;
 pub mod tables;
 pub mod validate;

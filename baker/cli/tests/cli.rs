@@ -106,14 +106,23 @@ fn bench_compares_with_clusterlod() {
     let o = run(MRES, &["bench", obj.to_str().unwrap(), "--report", report.to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("3072 input triangles"), "{}", text(&o));
-    let runs: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).expect("json");
+    assert!(text(&o).contains("at equal mean error: geomean"), "{}", text(&o));
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).expect("json");
+    let runs = &report["runs"];
     assert_eq!(runs[0]["builder"], "mres");
     assert_eq!(runs[1]["builder"], "clusterlod");
     for r in runs.as_array().unwrap() {
         assert_eq!(r["input_triangles"], 3072);
-        assert_eq!(r["cut_triangles"][0], 3072, "the cut at error 0 is the original");
+        let finest = &r["cuts"][0];
+        assert_eq!(finest["triangles"], 3072, "the cut at error 0 is the original");
+        // Only grid rounding (ours) separates the finest cut from the input.
+        assert!(finest["distance"]["max"].as_f64().unwrap() < 1e-4, "{finest}");
+        let coarsest = r["cuts"].as_array().unwrap().last().unwrap();
+        assert_eq!(coarsest["coarsest"], true);
+        assert!(coarsest["distance"]["max"].as_f64().unwrap() > 1e-4, "{coarsest}");
         assert!(r["peak_rss_bytes"].as_u64().unwrap() > 0);
     }
+    assert_eq!(report["quality"]["targets"].as_array().unwrap().len(), 5);
 }
 
 #[test]
@@ -304,7 +313,8 @@ fn every_command_counts_input_triangles_alike_and_reports_degenerates() {
     let bench = dir.path().join("bench.json");
     let b = run(MRES, &["bench", obj.to_str().unwrap(), "--report", bench.to_str().unwrap()]);
     assert!(b.status.success(), "{}", text(&b));
-    let runs: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&bench).unwrap()).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&bench).unwrap()).unwrap();
+    let runs = &report["runs"];
     for r in runs.as_array().unwrap() {
         assert_eq!(r["input_triangles"], 202, "{r}");
     }

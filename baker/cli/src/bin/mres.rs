@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use mres_build::BakeSettings;
 use mres_check::validate::{validate, Thresholds, ValidateOptions};
-use mres_cli::bench::{run_clusterlod, run_mres, BuilderRun, CUT_THRESHOLDS};
+use mres_cli::bench::{self, compare, measure, run_clusterlod, run_mres, BuilderRun, Report};
 use mres_cli::inspect::summarize;
 use mres_format::{select, MresFile};
 use mres_import::SourceMesh;
@@ -47,7 +47,9 @@ enum Command {
     /// view-dependent cut seen from a camera at a pixel threshold.
     Export(ExportArgs),
     /// Bake INPUT with mres and with meshoptimizer's clusterlod (each in its own child process)
-    /// and compare time, peak memory and quality.
+    /// and compare time, peak memory and quality: the triangles each needs at equal measured
+    /// distance to the input (mean and max, over uniform cuts; docs/BENCHMARKS.md, "Quality at
+    /// equal measured error").
     Bench(BenchArgs),
     /// Maintain the bake cache of `bake-all`.
     Cache(CacheArgs),
@@ -128,9 +130,14 @@ struct BenchArgs {
     /// e.g. to compare `error_bound` modes.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// Also write both builders' figures as JSON to FILE.
+    /// Also write both builders' figures as JSON to FILE: timings, memory, every cut's
+    /// measured distances and the comparison at equal measured error.
     #[arg(long, value_name = "FILE")]
     report: Option<PathBuf>,
+    /// Points sampled per direction and cut for the quality measure (triangle centroids and
+    /// edge midpoints, thinned by an even stride); 0 skips the quality measure.
+    #[arg(long, default_value_t = bench::DEFAULT_SAMPLES, value_name = "N")]
+    samples: usize,
 }
 
 #[derive(Args)]
@@ -184,6 +191,9 @@ struct BenchChildArgs {
     /// pipeline.toml whose [bake] settings to use.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Points per direction and cut for the quality measure; 0 skips it.
+    #[arg(long, default_value_t = 0)]
+    samples: usize,
 }
 
 /// The generated test meshes.
@@ -515,23 +525,33 @@ fn bench_child_cmd(a: BenchChildArgs) -> Result<ExitCode> {
         Some(path) => mres_cli::config::PipelineConfig::load(path).map_err(anyhow::Error::msg)?.bake,
         None => BakeSettings::default(),
     };
-    let mesh = mres_import::import_file(&a.input, &Default::default())?;
-    let run = match a.builder {
-        Builder::Mres => run_mres(mesh, &settings)?,
-        Builder::Clusterlod => run_clusterlod(mesh, &settings)?,
+    let import = || mres_import::import_file(&a.input, &Default::default());
+    let built = match a.builder {
+        Builder::Mres => run_mres(import()?, &settings)?,
+        Builder::Clusterlod => run_clusterlod(import()?, &settings)?,
+    };
+    let run = if a.samples == 0 {
+        built.run
+    } else {
+        // Imported again after the build so that the reference surface stays out of the
+        // builder's peak RSS (read before this).
+        let input = mres_check::distance::Surface::new(bench::triangles(&import()?));
+        measure(built, &input, a.samples)
     };
     println!("{}", serde_json::to_string(&run)?);
     Ok(ExitCode::SUCCESS)
 }
 
-/// Runs `builder` `repeat` times in child processes and keeps the minimum time and RSS.
+/// Runs `builder` `repeat` times in child processes and keeps the minimum time and RSS; the
+/// first run also measures quality (it does not depend on the run).
 fn bench_builder(builder: Builder, a: &BenchArgs) -> Result<BuilderRun> {
     let exe = std::env::current_exe()?;
     let name = builder.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
     let mut runs = Vec::new();
-    for _ in 0..a.repeat.max(1) {
+    for i in 0..a.repeat.max(1) {
         let mut child = std::process::Command::new(&exe);
         child.args(["bench-child", &name]).arg(&a.input);
+        child.arg("--samples").arg(if i == 0 { a.samples } else { 0 }.to_string());
         if let Some(path) = &a.config {
             child.arg("--config").arg(path);
         }
@@ -553,40 +573,33 @@ fn bench_cmd(a: BenchArgs) -> Result<ExitCode> {
         Some(path) => Some(Output::create(path)?),
         None => None,
     };
-    let best = [bench_builder(Builder::Mres, &a)?, bench_builder(Builder::Clusterlod, &a)?];
-    print_bench(&a, &best);
+    let runs = [bench_builder(Builder::Mres, &a)?, bench_builder(Builder::Clusterlod, &a)?];
+    let quality = compare(&runs[0], &runs[1]);
+    let result = Report { input: a.input.display().to_string(), runs, quality };
+    print_bench(&a, &result);
     if let Some(out) = report {
-        serde_json::to_writer_pretty(out.tmp.as_file(), &best).with_context(|| format!("{}", out.path.display()))?;
+        serde_json::to_writer_pretty(out.tmp.as_file(), &result).with_context(|| format!("{}", out.path.display()))?;
         out.finish()?;
     }
     Ok(ExitCode::SUCCESS)
 }
 
-fn print_bench(a: &BenchArgs, best: &[BuilderRun; 2]) {
-    let r0 = &best[0];
+fn print_bench(a: &BenchArgs, r: &Report) {
+    let best = &r.runs;
     println!(
         "{} ({} input triangles, {} degenerate dropped by the importer), min over {} run(s)",
         a.input.display(),
-        r0.input_triangles,
+        best[0].input_triangles,
         best[1].degenerate_dropped,
         a.repeat.max(1)
     );
     println!(
-        "{:<11} {:>8} {:>8} {:>10} {:>8} {:>6} {:>6} {:>6} {:>10}  triangles per uniform cut at {:?} × diagonal",
-        "builder",
-        "total s",
-        "DAG s",
-        "peak MiB",
-        "RSS B/tri",
-        "levels",
-        "roots",
-        "fill",
-        "level-0 tri",
-        CUT_THRESHOLDS
+        "{:<11} {:>8} {:>8} {:>10} {:>9} {:>6} {:>6} {:>6} {:>11}",
+        "builder", "total s", "DAG s", "peak MiB", "RSS B/tri", "levels", "roots", "fill", "level-0 tri"
     );
     for r in best {
         println!(
-            "{:<11} {:>8.3} {:>8.3} {:>10.1} {:>8.1} {:>6} {:>6} {:>6.1} {:>10}  {:?}{}",
+            "{:<11} {:>8.3} {:>8.3} {:>10.1} {:>9.1} {:>6} {:>6} {:>6.1} {:>11}{}",
             r.builder,
             r.seconds,
             r.dag_seconds,
@@ -596,7 +609,6 @@ fn print_bench(a: &BenchArgs, best: &[BuilderRun; 2]) {
             r.root_clusters,
             r.level0_fill,
             r.level0_triangles,
-            r.cut_triangles,
             if r.bytes > 0 {
                 format!("  file {:.2} B/input tri", r.bytes as f64 / r.input_triangles.max(1) as f64)
             } else {
@@ -610,4 +622,48 @@ fn print_bench(a: &BenchArgs, best: &[BuilderRun; 2]) {
         best[0].dag_seconds / best[1].dag_seconds,
         best[0].peak_rss_bytes as f64 / best[1].peak_rss_bytes.max(1) as f64
     );
+    if a.samples > 0 {
+        print_quality(a, r);
+    }
+}
+
+/// The triangles both builders need at equal measured error, per measure.
+fn print_quality(a: &BenchArgs, r: &Report) {
+    println!(
+        "\nquality at equal measured error: {} uniform cuts per builder, each measured against the input \
+         (distance / bounding-box diagonal; triangle centroids and edge midpoints, at most {} per direction, \
+         even stride; {:.1} s and {:.1} s to measure)",
+        r.runs[0].cuts.len(),
+        a.samples,
+        r.runs[0].measure_seconds,
+        r.runs[1].measure_seconds
+    );
+    let count = |v: &Option<f64>| v.map_or("-".to_owned(), |n| format!("{n:.0}"));
+    let ratio = |v: &Option<f64>| v.map_or("-".to_owned(), |n| format!("{n:.3}"));
+    println!(
+        "{:>8}  {:>10} {:>10} {:>6}   {:>10} {:>10} {:>6}",
+        "error", "mean: mres", "clusterlod", "ratio", "max: mres", "clusterlod", "ratio"
+    );
+    let q = &r.quality;
+    for (i, t) in q.targets.iter().enumerate() {
+        println!(
+            "{:>8.0e}  {:>10} {:>10} {:>6}   {:>10} {:>10} {:>6}",
+            t,
+            count(&q.mean.mres[i]),
+            count(&q.mean.clusterlod[i]),
+            ratio(&q.mean.ratio[i]),
+            count(&q.max.mres[i]),
+            count(&q.max.clusterlod[i]),
+            ratio(&q.max.ratio[i])
+        );
+    }
+    for (name, v) in [("mean", &q.mean), ("max", &q.max)] {
+        println!(
+            "triangles mres/clusterlod at equal {name} error: geomean {} over {} target(s), worst {} at {}",
+            ratio(&v.geomean_ratio),
+            v.compared,
+            ratio(&v.worst_ratio),
+            v.worst_target.map_or("-".to_owned(), |t| format!("{t:.0e}"))
+        );
+    }
 }
