@@ -1146,7 +1146,10 @@ class Checker:
         bad = self.bad_edges(U, M)
         ok = self.check_overlap(name, sel)
         if bad.any():
-            self.r.violation("cracked_cut", self.describe_cut_failure(name, sel, U, M, bad))
+            if len(self.r.violations.get("cracked_cut", {"examples": []})["examples"]) < MAX_EXAMPLES:
+                self.r.violation("cracked_cut", self.describe_cut_failure(name, sel, U, M, bad))
+            else:  # describing costs a scan of every triangle: only the printed examples
+                self.r.violations["cracked_cut"]["count"] += 1
             ok = False
         if stats is not None:
             self.note_pinched(name, U, stats)
