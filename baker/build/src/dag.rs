@@ -33,6 +33,11 @@ pub struct BuiltCluster {
     pub own_error: f32,
     /// The group it belongs to (assigned when its group is simplified or made root).
     pub group: u32,
+    /// Open-border marks, one 3-bit mask per triangle (see [`crate::open`]).
+    pub open: Vec<u8>,
+    /// The level-0 triangles (welded vertex ids) this cluster stands for, while the builder
+    /// measures errors against the original surface (`deviation`); emptied once grouped.
+    pub owned: Vec<u32>,
 }
 
 /// Receives the finished clusters of each welded mesh the DAG is built on, while that mesh
@@ -150,6 +155,8 @@ pub struct TopCluster {
     pub own_sphere: Sphere,
     /// Own error.
     pub own_error: f32,
+    /// Open-border marks per triangle.
+    pub open: Vec<u8>,
 }
 
 impl TopCluster {
@@ -162,6 +169,7 @@ impl TopCluster {
             own_group: cluster.own_group,
             own_sphere: cluster.own_sphere,
             own_error: cluster.own_error,
+            open: cluster.open.clone(),
         }
     }
 

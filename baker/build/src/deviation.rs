@@ -49,26 +49,39 @@ pub fn part_sizes(mesh: &WeldedMesh) -> Vec<f32> {
     (0..mesh.position_count as u32).map(|p| diagonal[sets.find(p) as usize] as f32).collect()
 }
 
-/// Simplifies a group (`simplify_group`) and measures its stored error (see [`group_error`]);
-/// `triangle_errors` gives, per input triangle, the own error of the member it came from. An
-/// outlier (whose error exceeds the members' by more than [`OUTLIER_RATIO`] × meshoptimizer's
-/// estimate) is simplified again with the vertices around its farthest samples locked as well,
-/// keeping the result with the smallest stored error. Returns the result and its stored error.
+/// The surface a group's output is measured against: the original (level-0) triangles under
+/// the group (errors 0), or, where those are not at hand (a later shard stage), the members'
+/// triangles, each with its member's error.
+pub struct Reference<'a> {
+    /// Triangle list in welded vertex ids.
+    pub triangles: &'a [u32],
+    /// Per triangle, the error of the surface it stands for.
+    pub errors: Vec<f32>,
+    /// The largest own error among the group's members: the stored error is at least this
+    /// (monotone errors), and the outlier test counts only what the step adds beyond it.
+    pub members_error: f32,
+}
+
+/// Simplifies a group (`simplify_group` on `input` with open-border `masks`) and measures its
+/// stored error against `reference` (see [`group_error`]). An outlier (whose error exceeds the
+/// members' by more than [`OUTLIER_RATIO`] × meshoptimizer's estimate) is simplified again with
+/// the vertices around its farthest samples locked as well, keeping the result with the
+/// smallest stored error. Returns the result and its stored error.
 pub fn simplify_measured(
     mesh: &WeldedMesh,
     input: &[u32],
-    triangle_errors: &[f32],
+    masks: &[u8],
+    reference: &Reference,
     locked: impl Fn(u32) -> bool,
-    special: &[(u64, u32)],
     settings: &BakeSettings,
     part_size: &[f32],
 ) -> Option<(Simplified, f32)> {
-    let members = triangle_errors.iter().copied().fold(0.0, f32::max);
+    let (members, triangles, errors) = (reference.members_error, reference.triangles, &reference.errors);
     let error_of = |s: &Simplified, hot_above: Option<f64>| {
-        let (total, hot) = measure(mesh, input, triangle_errors, &s.indices, part_size, s.error as f64, hot_above);
+        let (total, hot) = measure(mesh, triangles, errors, &s.indices, part_size, s.error as f64, hot_above);
         (stored(total, s.error).max(members), hot)
     };
-    let mut best = simplify_group(mesh, input, &locked, special, settings)?;
+    let mut best = simplify_group(mesh, input, masks, &locked, settings)?;
     let (mut error, _) = error_of(&best, None);
     let mut extra: Vec<u32> = Vec::new();
     for _ in 0..OUTLIER_RETRIES {
@@ -88,7 +101,7 @@ pub fn simplify_measured(
         }
         let id = |v: u32| mesh.position_ids[v as usize];
         let lock = |v: u32| locked(v) || extra.binary_search(&id(v)).is_ok();
-        let Some(retry) = simplify_group(mesh, input, lock, special, settings) else { break };
+        let Some(retry) = simplify_group(mesh, input, masks, lock, settings) else { break };
         let (e, _) = error_of(&retry, None);
         if e >= error {
             break;
@@ -96,6 +109,27 @@ pub fn simplify_measured(
         (best, error) = (retry, e);
     }
     Some((best, error))
+}
+
+/// Hands each triangle of `owned` (level-0 triangles, welded ids) to the cluster of
+/// `children` that holds the output triangle nearest to its centroid: the next level measures
+/// it against that cluster's group. Every level-0 triangle thus stays under exactly one
+/// pending cluster, and a group's reference is the original surface its members replace.
+pub fn assign_owned(mesh: &WeldedMesh, owned: &[u32], children: &[Vec<u32>]) -> Vec<Vec<u32>> {
+    let point = |v: u32| mesh.positions[v as usize];
+    let tris: Vec<Triangle<f32>> =
+        children.iter().flat_map(|c| c.chunks_exact(3).map(|t| [point(t[0]), point(t[1]), point(t[2])])).collect();
+    let child_of: Vec<usize> = children.iter().enumerate().flat_map(|(i, c)| std::iter::repeat_n(i, c.len() / 3)).collect();
+    let bvh = Bvh::new(&tris);
+    let mut out = vec![Vec::new(); children.len()];
+    let mut hint = usize::MAX;
+    for t in owned.chunks_exact(3) {
+        let c = [0, 1, 2].map(|k| (point(t[0])[k] + point(t[1])[k] + point(t[2])[k]) * (1.0 / 3.0));
+        let (_, nearest) = bvh.nearest_squared(&tris, c, 0.0, hint);
+        hint = nearest;
+        out[child_of[nearest]].extend_from_slice(t);
+    }
+    out
 }
 
 /// A group's stored error (object space) when all its members have error `members_error`: see

@@ -98,5 +98,6 @@ fn dag_cluster(mesh: &WeldedMesh, c: &BuiltCluster) -> DagCluster {
             Vec::new()
         },
         indices,
+        open_edges: c.open.clone(),
     }
 }

@@ -7,12 +7,13 @@
 
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopCluster, LOCAL};
-use crate::deviation::{part_sizes, simplify_measured};
+use crate::deviation::{assign_owned, part_sizes, simplify_measured, Reference};
 use crate::error::BakeError;
 use crate::partition::{cluster_graph, partition};
 use crate::progress::Progress;
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Method};
+use crate::open;
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
 use mres_geom::edges::sorted_edge_keys;
@@ -22,19 +23,43 @@ use rayon::prelude::*;
 /// simplified further (an open boundary is locked in every cut) ends in one root group of up
 /// to this many clusters; beyond it, several root groups are formed and reported.
 pub const MAX_ROOT_CLUSTERS: usize = 256;
+/// `always_locked` reason: on a shard or cell border (never unlocked in that cell).
+const CELL_BORDER: u8 = 1;
+/// `always_locked` reason: on a non-manifold edge (unlocked when every group is stuck).
+const NON_MANIFOLD: u8 = 2;
+/// A stuck top of at most this many clusters is simplified as one group (the validator's
+/// largest group size, docs/INVARIANTS.md §3).
+const FORCED_GROUP_CLUSTERS: usize = 32;
 /// Safety stop on the number of levels.
 const MAX_LEVELS: u32 = 64;
 
-/// One simplified group: its triangles split into parent clusters, its error, the method used.
-type Simplified = (Vec<Vec<u32>>, f32, Method);
+/// One simplified group: its parent clusters, its error, the method used.
+struct Simplified {
+    children: Vec<Child>,
+    error: f32,
+    method: Method,
+}
 
-/// Level-0 clusters of a welded mesh, with their own bounds.
-pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings) -> Vec<BuiltCluster> {
-    level0_clusters(mesh, settings)
+/// One parent cluster of a simplified group: triangles, open-border marks, owned level-0
+/// triangles (empty unless errors are measured against level 0).
+struct Child {
+    indices: Vec<u32>,
+    open: Vec<u8>,
+    owned: Vec<u32>,
+}
+
+/// Level-0 clusters of a welded mesh, with their own bounds; the edges of `open` (sorted
+/// position-id keys: the original's odd edges) are marked once each.
+pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64]) -> Vec<BuiltCluster> {
+    let clusters = level0_clusters(mesh, settings);
+    let marks = open::mark(mesh, &clusters, open);
+    clusters
         .into_par_iter()
-        .map(|indices| {
+        .zip(marks)
+        .map(|(indices, open)| {
             let own_sphere = bounding_sphere(&indices, &mesh.positions);
-            BuiltCluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP }
+            let owned = indices.clone();
+            BuiltCluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP, open, owned }
         })
         .collect()
 }
@@ -44,10 +69,9 @@ pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings) -> Vec<BuiltClu
 pub(crate) struct Builder<'a> {
     mesh: &'a WeldedMesh,
     settings: &'a BakeSettings,
-    /// Per position id: on an open or non-manifold edge of this mesh, so locked at every level.
-    always_locked: Vec<bool>,
-    /// Open and non-manifold edges with their use counts (see `open_and_nonmanifold`).
-    special: Vec<(u64, u32)>,
+    /// Per position id: why it is locked at every level ([`CELL_BORDER`], [`NON_MANIFOLD`]
+    /// bits; see `always_locked`).
+    always_locked: Vec<u8>,
     /// Per position id, the size of its connected part (see `deviation::part_sizes`).
     part_size: Vec<f32>,
     /// Every cluster built so far, in creation order.
@@ -65,7 +89,7 @@ impl<'a> Builder<'a> {
     /// A builder whose pending clusters are `clusters` (triangles into `mesh`); new groups
     /// start at `level`.
     pub fn new(mesh: &'a WeldedMesh, settings: &'a BakeSettings, clusters: Vec<BuiltCluster>, level: u32) -> Self {
-        let (always_locked, special) = open_and_nonmanifold(mesh);
+        let always_locked = always_locked(mesh, &clusters);
         let part_size = match settings.error_bound {
             ErrorBound::Measured => part_sizes(mesh),
             ErrorBound::Simplifier => Vec::new(),
@@ -76,7 +100,6 @@ impl<'a> Builder<'a> {
             mesh,
             settings,
             always_locked,
-            special,
             part_size,
             clusters,
             groups: Vec::new(),
@@ -101,8 +124,16 @@ impl<'a> Builder<'a> {
         let refs: Vec<&[u32]> = self.pending.iter().map(|&c| clusters[c].indices.as_slice()).collect();
         let centers: Vec<[f32; 3]> = self.pending.iter().map(|&c| clusters[c].own_sphere.center).collect();
         let graph = cluster_graph(&refs, &self.mesh.position_ids, &centers);
-        let parts = partition(&graph, self.settings.group_size as usize);
-        let results = self.simplify_parts(&parts, &refs);
+        let mut parts = partition(&graph, self.settings.group_size as usize);
+        let mut results = self.simplify_parts(&parts, &refs, NON_MANIFOLD);
+        if results.iter().all(Option::is_none) {
+            // Stuck everywhere: unlock the non-manifold edges, and take a small top whole
+            // (no group border is left to keep), so that every input reaches one root cluster.
+            if self.pending.len() <= FORCED_GROUP_CLUSTERS {
+                parts = vec![(0..self.pending.len() as u32).collect()];
+            }
+            results = self.simplify_parts(&parts, &refs, 0);
+        }
         drop(refs);
         let progressed = self.adopt(&parts, results);
         self.level += 1;
@@ -120,7 +151,8 @@ impl<'a> Builder<'a> {
 
     /// Simplifies each part (a group of pending clusters, whose triangles are `refs`) in
     /// parallel, with the positions it shares with other parts locked; `None` where stuck.
-    fn simplify_parts(&self, parts: &[Vec<u32>], refs: &[&[u32]]) -> Vec<Option<Simplified>> {
+    /// `lock` selects which [`always_locked`] reasons hold (the cell border always does).
+    fn simplify_parts(&self, parts: &[Vec<u32>], refs: &[&[u32]], lock: u8) -> Vec<Option<Simplified>> {
         let (mesh, settings) = (self.mesh, self.settings);
         // Which group uses each position; positions used by two groups are locked.
         let mut owner = vec![u32::MAX; mesh.position_count];
@@ -135,31 +167,47 @@ impl<'a> Builder<'a> {
         let always_locked = &self.always_locked;
         let locked = |v: u32| {
             let p = mesh.position_ids[v as usize] as usize;
-            owner[p] == u32::MAX - 1 || always_locked[p]
+            owner[p] == u32::MAX - 1 || always_locked[p] & (CELL_BORDER | lock) != 0
         };
-        let (special, part_size) = (&self.special, &self.part_size);
-        let own_errors: Vec<f32> = self.pending.iter().map(|&c| self.clusters[c].own_error).collect();
+        let part_size = &self.part_size;
+        let clusters = &self.clusters;
+        let pending = &self.pending;
         parts
             .par_iter()
             .map(|part| {
+                let members = || part.iter().map(|&c| &clusters[pending[c as usize]]);
                 let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
+                let masks: Vec<u8> = members().flat_map(|m| m.open.iter().copied()).collect();
+                let members_error = members().map(|m| m.own_error).fold(0.0, f32::max);
+                let owned: Vec<u32> = members().flat_map(|m| m.owned.iter().copied()).collect();
                 let (s, error) = match settings.error_bound {
                     ErrorBound::Measured => {
-                        // Per input triangle, the own error of the member it came from.
-                        let errors: Vec<f32> = part
-                            .iter()
-                            .flat_map(|&c| std::iter::repeat_n(own_errors[c as usize], refs[c as usize].len() / 3))
-                            .collect();
-                        simplify_measured(mesh, &merged, &errors, locked, special, settings, part_size)?
+                        let reference = if owned.is_empty() {
+                            // Against the members, each with its own error (a later shard stage).
+                            let errors = members().flat_map(|m| std::iter::repeat_n(m.own_error, m.indices.len() / 3));
+                            Reference { triangles: &merged, errors: errors.collect(), members_error }
+                        } else {
+                            // Against the original surface under the group: nothing adds up.
+                            Reference { triangles: &owned, errors: vec![0.0; owned.len() / 3], members_error }
+                        };
+                        simplify_measured(mesh, &merged, &masks, &reference, locked, settings, part_size)?
                     }
                     ErrorBound::Simplifier => {
-                        let s = simplify_group(mesh, &merged, locked, special, settings)?;
+                        let s = simplify_group(mesh, &merged, &masks, locked, settings)?;
                         let error = s.error;
                         (s, error)
                     }
                 };
-                let children = split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings);
-                Some((children, error, s.method))
+                let indices = split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings);
+                let open = open::mark(mesh, &indices, &s.needed);
+                let owned = if owned.is_empty() { vec![Vec::new(); indices.len()] } else { assign_owned(mesh, &owned, &indices) };
+                let children = indices
+                    .into_iter()
+                    .zip(open)
+                    .zip(owned)
+                    .map(|((indices, open), owned)| Child { indices, open, owned })
+                    .collect();
+                Some(Simplified { children, error, method: s.method })
             })
             .collect()
     }
@@ -172,7 +220,7 @@ impl<'a> Builder<'a> {
         let mut progressed = false;
         for (part, result) in parts.iter().zip(results) {
             let members: Vec<usize> = part.iter().map(|&c| self.pending[c as usize]).collect();
-            let Some((children, error, method)) = result else {
+            let Some(Simplified { children, error, method }) = result else {
                 self.stats.stuck_groups += 1;
                 next.extend_from_slice(&members);
                 continue;
@@ -185,11 +233,12 @@ impl<'a> Builder<'a> {
             self.groups.push(BuiltGroup { sphere, error, level: self.level });
             for &c in &members {
                 clusters[c].group = id;
+                clusters[c].owned = Vec::new();
             }
-            for indices in children {
+            for Child { indices, open, owned } in children {
                 next.push(clusters.len());
-                let (own_sphere, own_error) = (sphere, error);
-                clusters.push(BuiltCluster { indices, own_group: id, own_sphere, own_error, group: NO_GROUP });
+                let (own_sphere, own_error, group) = (sphere, error, NO_GROUP);
+                clusters.push(BuiltCluster { indices, own_group: id, own_sphere, own_error, group, open, owned });
             }
         }
         next.sort_unstable();
@@ -285,24 +334,28 @@ fn level0_clusters(mesh: &WeldedMesh, settings: &BakeSettings) -> Vec<Vec<u32>> 
         .collect()
 }
 
-/// The original's open (used once) and non-manifold (used 3+ times) edges, with their use
-/// counts, sorted; and per position whether it lies on one. Those positions stay locked at
-/// every level so that every cut has exactly the original's boundary.
-fn open_and_nonmanifold(mesh: &WeldedMesh) -> (Vec<bool>, Vec<(u64, u32)>) {
-    let mut edges: Vec<u64> = mesh
-        .indices
-        .par_chunks(3 * 4096)
-        .flat_map_iter(|c| sorted_edge_keys(c, |v| mesh.position_ids[v as usize]))
-        .collect();
+/// Per position id, whether it stays locked at every level of this builder: the ends of the
+/// edges the pending `clusters` use an odd number of times unmarked (a shard or cell border:
+/// the neighbouring cell holds the other side) and of edges used three or more times
+/// (non-manifold: several groups may share them, so they are kept as they are).
+fn always_locked(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<u8> {
+    let id = |v: u32| mesh.position_ids[v as usize];
+    let (mut edges, mut marked): (Vec<u64>, Vec<u64>) = clusters
+        .par_iter()
+        .map(|c| (sorted_edge_keys(&c.indices, id), open::marked_edges(mesh, &c.indices, &c.open)))
+        .reduce(|| (Vec::new(), Vec::new()), |mut a, b| {
+            a.0.extend(b.0);
+            a.1.extend(b.1);
+            a
+        });
     edges.par_sort_unstable();
-    let mut locked = vec![false; mesh.position_count];
-    let mut special = Vec::new();
+    marked.par_sort_unstable();
+    let mut locked = vec![0u8; mesh.position_count];
     for run in edges.chunk_by(|a, b| a == b) {
-        if run.len() != 2 {
-            locked[(run[0] >> 32) as usize] = true;
-            locked[(run[0] & 0xffff_ffff) as usize] = true;
-            special.push((run[0], run.len() as u32));
-        }
+        let marks = marked.partition_point(|&m| m <= run[0]) - marked.partition_point(|&m| m < run[0]);
+        let why = if (run.len() - marks) % 2 == 1 { CELL_BORDER } else { 0 } | if run.len() >= 3 { NON_MANIFOLD } else { 0 };
+        locked[(run[0] >> 32) as usize] |= why;
+        locked[(run[0] & 0xffff_ffff) as usize] |= why;
     }
-    (locked, special)
+    locked
 }

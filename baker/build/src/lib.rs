@@ -10,6 +10,7 @@ pub mod deviation;
 pub mod encode;
 pub mod error;
 pub mod levels;
+pub mod open;
 pub mod partition;
 pub mod progress;
 pub mod settings;

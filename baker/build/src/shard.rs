@@ -37,7 +37,9 @@ use mres_format::{Grid, UvQuant, NO_GROUP};
 use mres_import::mesh::bounds;
 use mres_import::mesh::{Corner, NONE};
 use mres_import::SourceMesh;
+use crate::open;
 use rayon::prelude::*;
+use rustc_hash::FxHashSet;
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -70,7 +72,7 @@ pub fn build_sharded<S: TriangleSource, O: DagOutput>(
     let grid = (Grid::covering(lo, hi, settings.position_bits), uv_quant(uvs));
     let cells = Cells::new(&source, settings.shard_triangles);
     progress(&format!("shard: {} triangles into {} cells", source.triangles(), cells.count()));
-    let spill = Spill::new(&source, &cells)?;
+    let spill = Spill::new(&source, &cells, grid.0)?;
     clock.lap(&mut stats, "spill");
 
     // Stage 1: build the shards from their spill files.
@@ -109,6 +111,10 @@ fn spill_error(e: std::io::Error) -> BakeError {
 /// drop): only the vertex attributes stay in memory.
 struct Spill {
     dir: tempfile::TempDir,
+    /// The whole mesh's edges used an odd number of times (its open and odd non-manifold
+    /// edges), by [`grid_edge`] key: a shard marks these and locks its other open edges,
+    /// which are shard borders.
+    open: FxHashSet<u128>,
     /// Triangles spilled.
     kept: u64,
     /// Triangles dropped as degenerate (two corners at one position).
@@ -122,9 +128,9 @@ type Record = [u32; 10];
 const RECORD_BYTES: usize = std::mem::size_of::<Record>();
 
 impl Spill {
-    fn new(source: &impl TriangleSource, cells: &Cells) -> Result<Spill, BakeError> {
+    fn new(source: &impl TriangleSource, cells: &Cells, grid: Grid) -> Result<Spill, BakeError> {
         let dir = tempfile::Builder::new().prefix("mres-shards-").tempdir().map_err(spill_error)?;
-        let mut spill = Spill { dir, kept: 0, degenerate: 0, multi_material: false };
+        let mut spill = Spill { dir, open: FxHashSet::default(), kept: 0, degenerate: 0, multi_material: false };
         let mut writers: Vec<BufWriter<File>> = (0..cells.count())
             .map(|s| File::create(spill.path(s)).map(|f| BufWriter::with_capacity(1 << 16, f)))
             .collect::<Result<_, _>>()
@@ -139,6 +145,15 @@ impl Spill {
                 return;
             }
             spill.multi_material |= *first_material.get_or_insert(material) != material;
+            // Toggling each edge leaves the odd ones (a triangle that the grid makes
+            // degenerate toggles its one real edge twice, as welding drops it).
+            let q = p.map(|x| grid.quantize(x));
+            for k in 0..3 {
+                let e = grid_edge(q[k], q[(k + 1) % 3]);
+                if !spill.open.remove(&e) {
+                    spill.open.insert(e);
+                }
+            }
             let centroid = [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k]) / 3.0);
             if let Err(e) = writers[cells.cell_of(centroid)].write_all(&record_bytes(t, material)) {
                 io_error.get_or_insert(e);
@@ -170,6 +185,19 @@ impl Spill {
         let word = |b: &[u8]| u32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
         Ok(bytes.chunks_exact(RECORD_BYTES).map(|r| std::array::from_fn(|k| word(&r[4 * k..]))).collect())
     }
+}
+
+/// A direction-free key of the edge between grid points `a` and `b`: two independent 64-bit
+/// mixes of the six coordinates (collisions are far below one in 10^18 edges).
+fn grid_edge(a: [i32; 3], b: [i32; 3]) -> u128 {
+    let (a, b) = if a <= b { (a, b) } else { (b, a) };
+    let mix = |seed: u64| {
+        a.iter().chain(&b).fold(seed, |h, &v| {
+            let z = (h ^ v as u32 as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+            z ^ (z >> 29)
+        })
+    };
+    (mix(0x243f_6a88_85a3_08d3) as u128) << 64 | mix(0x1319_8a2e_0370_7344) as u128
 }
 
 /// The spill record of a triangle.
@@ -301,7 +329,7 @@ impl ShardContext<'_> {
         (0..count)
             .into_par_iter()
             .map(|s| {
-                let cell = self.build_shard(source, &spill.path(s), output)?;
+                let cell = self.build_shard(source, &spill.path(s), &spill.open, output)?;
                 let (levels, top) = (cell.levels, cell.top.len());
                 let triangles = cell.triangles;
                 progress(&format!(
@@ -318,6 +346,7 @@ impl ShardContext<'_> {
         &self,
         source: &impl TriangleSource,
         spill: &Path,
+        global_open: &FxHashSet<u128>,
         output: &O,
     ) -> Result<Cell<O::Clusters>, BakeError> {
         let records = Spill::read(spill)?;
@@ -327,7 +356,18 @@ impl ShardContext<'_> {
         let mut welded = weld_on(&mesh, self.settings, self.grid.0, self.grid.1);
         welded.multi_material = self.multi_material;
         drop(mesh);
-        let cell = self.levels(&welded, level0(&welded, self.settings), 0, false, output)?;
+        // The shard's odd edges that are odd in the whole mesh too are open; the rest are
+        // shard borders (`Builder` locks them).
+        let mut point = vec![[0i32; 3]; welded.position_count];
+        for (v, &p) in welded.position_ids.iter().enumerate() {
+            point[p as usize] = welded.grid_positions[v];
+        }
+        let q = |p: u32| point[p as usize];
+        let open: Vec<u64> = open::odd_edges(&welded, &welded.indices)
+            .into_iter()
+            .filter(|&e| global_open.contains(&grid_edge(q((e >> 32) as u32), q(e as u32))))
+            .collect();
+        let cell = self.levels(&welded, level0(&welded, self.settings, &open), 0, false, output)?;
         Ok(Cell {
             triangles,
             welded_vertices: welded.positions.len() as u64,
@@ -458,6 +498,8 @@ impl ShardContext<'_> {
                     own_sphere: t.own_sphere,
                     own_error: t.own_error,
                     group: NO_GROUP,
+                    open: t.open.clone(),
+                    owned: Vec::new(),
                 }
             })
             .collect();

@@ -1,7 +1,9 @@
-//! Simplify: reduce one group to about half its triangles with its border locked
-//! (meshopt `simplify_with_attributes_and_locks`, absolute error, normals and UVs weighted),
+//! Simplify: reduce one group to about half its triangles with its border locked vertex by
+//! vertex and open borders simplified along themselves (meshopt
+//! `simplify_with_attributes_and_locks`, absolute error, normals and UVs weighted),
 //! with a permissive and then a sloppy fallback when the group is stuck (as clusterlod does).
 
+use crate::open;
 use crate::settings::BakeSettings;
 use crate::weld::WeldedMesh;
 use meshopt::{SimplifyOptions, VertexDataAdapter};
@@ -29,6 +31,16 @@ pub struct Simplified {
     pub error: f32,
     /// The simplifier that reached the target.
     pub method: Method,
+    /// The output's edges that need an open-border mark, sorted (see [`crate::open`]).
+    pub needed: Vec<u64>,
+}
+
+/// The position ids of the `vertices` for which `locked` is true, sorted.
+fn locked_positions(mesh: &WeldedMesh, vertices: &[u32], locked: impl Fn(u32) -> bool) -> Vec<u32> {
+    let mut out: Vec<u32> = vertices.iter().filter(|&&v| locked(v)).map(|&v| mesh.position_ids[v as usize]).collect();
+    out.sort_unstable();
+    out.dedup();
+    out
 }
 
 /// Sloppy simplification estimates its error loosely; scale it (clusterlod does the same).
@@ -38,14 +50,15 @@ const SLOPPY_ERROR_FACTOR: f32 = 2.0;
 /// offending positions are locked and the method runs again.
 const REPAIR_ATTEMPTS: usize = 4;
 
-/// Simplifies the triangle list `indices` (welded vertex ids) with every vertex for which
-/// `locked` is true kept in place; `special` lists the original's open and non-manifold edges. `None` when no simplifier gets below the stuck ratio with
-/// the group's border intact and its interior manifold.
+/// Simplifies the triangle list `indices` (welded vertex ids, open-border `masks` per
+/// triangle) with every vertex for which `locked` is true kept in place; open borders are
+/// simplified along themselves. `None` when no simplifier gets below the stuck ratio with the
+/// group's border intact and no new hole.
 pub fn simplify_group(
     mesh: &WeldedMesh,
     indices: &[u32],
+    masks: &[u8],
     locked: impl Fn(u32) -> bool,
-    special: &[(u64, u32)],
     settings: &BakeSettings,
 ) -> Option<Simplified> {
     // Compact the group's vertices so that each group works on a small, local vertex array.
@@ -67,7 +80,7 @@ pub fn simplify_group(
         attributes: &attributes,
         weights: &weights,
         limit: (triangles as f32 * settings.stuck_ratio) as usize,
-        border: EdgeCounts::border(mesh, indices, special),
+        border: EdgeCounts::new(mesh, indices, masks, &locked_positions(mesh, &vertices, &locked)),
     };
     for method in [Method::Regular, Method::Permissive, Method::Prune, Method::Sloppy] {
         if method == Method::Permissive && weights.is_empty() {
@@ -82,7 +95,7 @@ pub fn simplify_group(
                 break;
             }
             match group.border.check(mesh, &out) {
-                Ok(()) => return Some(Simplified { indices: out, error, method }),
+                Ok(needed) => return Some(Simplified { indices: out, error, method, needed }),
                 Err(bad) => {
                     // Lock the offending edges' ends and their neighbours, and aim a little
                     // less low: such pinches come from the last collapses.
@@ -131,7 +144,9 @@ impl Group<'_> {
     fn run(&self, method: Method, locks: &[bool], target: usize) -> Option<(Vec<u32>, f32)> {
         let (local, adapter) = (self.local, self.adapter);
         let stride = self.weights.len() * 4;
-        let base = SimplifyOptions::LockBorder | SimplifyOptions::ErrorAbsolute;
+        // No `LockBorder`: the group border is locked vertex by vertex (`locks`), and open
+        // borders collapse along themselves, as meshoptimizer does for unlocked borders.
+        let base = SimplifyOptions::ErrorAbsolute;
         let mut error = 0.0f32;
         let result = match method {
             Method::Regular | Method::Permissive => {
@@ -174,57 +189,87 @@ impl Group<'_> {
 }
 
 /// Edge use counts by position, to check that a simplified group keeps its border exactly
-/// and has no hole inside: the local form of the crack-freedom invariant.
+/// and opens no hole inside: the local form of the crack-freedom invariant
+/// (docs/INVARIANTS.md §1), which also says which output edges need an open-border mark.
 struct EdgeCounts {
-    /// Sorted (edge, uses) of the input's edges not used exactly twice.
-    border: Vec<(u64, u32)>,
-    /// The original's open and non-manifold edges, sorted: an output must not create one
-    /// (another group may already use it, and together they would break its count).
-    special: Vec<u64>,
+    /// Sorted (edge, uses, marked uses) of the group border: the input edges used an odd
+    /// number of times unmarked (shared with another group, or a cell border) and every input
+    /// edge between two locked positions (another group may use it too). Kept exactly.
+    border: Vec<(u64, u32, u32)>,
+    /// Locked positions of the group, sorted: an output must not add an edge between two.
+    locked: Vec<u32>,
+    /// Positions on a marked input edge, sorted: the only ones an open output edge may join
+    /// (the simplifier moves open-border vertices along the border, never opens a hole).
+    open: Vec<u32>,
 }
 
 fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
     mres_geom::edges::sorted_edge_keys(indices, |v| mesh.position_ids[v as usize])
 }
 
+fn ends(e: u64) -> [u32; 2] {
+    [(e >> 32) as u32, e as u32]
+}
+
 impl EdgeCounts {
-    /// Odd counts mark the group's border (shared with the rest of the mesh, or the original's
-    /// open edges); the original's open and non-manifold edges (`special`, sorted) are kept too.
-    /// Other edges are interior and free to change.
-    fn border(mesh: &WeldedMesh, indices: &[u32], special: &[(u64, u32)]) -> EdgeCounts {
+    /// The border of the group `indices` whose triangles carry `masks`; `locked` tells the
+    /// locked vertices.
+    fn new(mesh: &WeldedMesh, indices: &[u32], masks: &[u8], locked: &[u32]) -> EdgeCounts {
         let keys = edge_keys(mesh, indices);
-        let is_special = |k: u64| special.binary_search_by_key(&k, |e| e.0).is_ok();
+        let marked = open::marked_edges(mesh, indices, masks);
+        let marks = |e: u64| marked.partition_point(|&m| m <= e) - marked.partition_point(|&m| m < e);
+        let is_locked = |p: u32| locked.binary_search(&p).is_ok();
         let border = keys
             .chunk_by(|a, b| a == b)
-            .filter(|r| r.len() % 2 == 1 || is_special(r[0]))
-            .map(|r| (r[0], r.len() as u32))
+            .filter_map(|r| {
+                let m = marks(r[0]);
+                let unmarked_odd = (r.len() - m) % 2 == 1;
+                (unmarked_odd || ends(r[0]).iter().all(|&p| is_locked(p))).then_some((r[0], r.len() as u32, m as u32))
+            })
             .collect();
-        EdgeCounts { border, special: special.iter().map(|e| e.0).collect() }
+        let mut open: Vec<u32> = marked.iter().flat_map(|&e| ends(e)).collect();
+        open.sort_unstable();
+        open.dedup();
+        EdgeCounts { border, locked: locked.to_vec(), open }
     }
 
-    /// `Ok` if `out` uses every border edge as often as the input and every other edge an even
-    /// number of times (twice, or four times where a thin part pinches into one edge); otherwise
-    /// the offending edges (including border edges it lost). An odd count is a hole or a
-    /// T-junction.
-    fn check(&self, mesh: &WeldedMesh, out: &[u32]) -> Result<(), Vec<u64>> {
+    /// True when the group shares no edge or position with anything else.
+    fn isolated(&self) -> bool {
+        self.border.is_empty() && self.locked.is_empty()
+    }
+
+    /// The output's edges that need a mark (sorted) if `out` uses every border edge as often
+    /// as the input and its other odd edges join open-border positions only; otherwise the
+    /// offending edges (including border edges it lost).
+    fn check(&self, mesh: &WeldedMesh, out: &[u32]) -> Result<Vec<u64>, Vec<u64>> {
         let keys = edge_keys(mesh, out);
-        let mut bad = Vec::new();
+        let (mut bad, mut needed) = (Vec::new(), Vec::new());
         let mut seen = vec![false; self.border.len()];
+        let all = |set: &[u32], e: u64| ends(e).iter().all(|p| set.binary_search(p).is_ok());
         for run in keys.chunk_by(|a, b| a == b) {
-            match self.border.binary_search_by_key(&run[0], |e| e.0) {
+            let e = run[0];
+            match self.border.binary_search_by_key(&e, |b| b.0) {
                 Ok(i) => {
                     seen[i] = true;
                     if self.border[i].1 != run.len() as u32 {
-                        bad.push(run[0]);
+                        bad.push(e);
+                    } else if self.border[i].2 == 1 {
+                        needed.push(e);
+                    } else if self.border[i].2 > 1 {
+                        bad.push(e);
                     }
                 }
-                Err(_) if run.len() % 2 != 0 || self.special.binary_search(&run[0]).is_ok() => bad.push(run[0]),
+                Err(_) if all(&self.locked, e) => bad.push(e),
+                // A group that shares nothing (an isolated part, or the whole top) may open
+                // any edge: no neighbour can crack, and the measured error sees a hole.
+                Err(_) if run.len() % 2 == 1 && (all(&self.open, e) || self.isolated()) => needed.push(e),
+                Err(_) if run.len() % 2 == 1 => bad.push(e),
                 Err(_) => {}
             }
         }
         bad.extend(self.border.iter().zip(&seen).filter(|(_, s)| !**s).map(|(e, _)| e.0));
         if bad.is_empty() {
-            Ok(())
+            Ok(needed)
         } else {
             Err(bad)
         }

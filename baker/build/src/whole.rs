@@ -27,7 +27,8 @@ pub fn build_whole<O: DagOutput>(
         _ => return Err(BakeError::Empty(source_triangles)),
     };
     clock.lap(&mut stats, "weld");
-    let mut builder = Builder::new(&welded, settings, level0(&welded, settings), 0);
+    let open = crate::open::odd_edges(&welded, &welded.indices);
+    let mut builder = Builder::new(&welded, settings, level0(&welded, settings, &open), 0);
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
     builder.build_to_root(progress);

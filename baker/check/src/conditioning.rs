@@ -100,12 +100,12 @@ pub(crate) fn conditioning(
         }
     }
 
-    // Boundaries: a cluster's edges used an odd number of times within it, leaving out the
-    // original's open and non-manifold edges (locked in every cut by design). A cluster whose
-    // remaining boundary is empty (a whole closed part, or a part bounded only by the
-    // original's open edges) has nothing that could have moved and is not compared.
+    // Boundaries: a cluster's edges used an odd number of times unmarked within it (marked
+    // edges are open border, not shared with a neighbour). A cluster whose remaining boundary
+    // is empty (a whole closed part, or a part bounded only by open border) has nothing that
+    // could have moved and is not compared.
     let boundary = |c: usize| -> Vec<u32> {
-        edges.per_cluster[c].iter().filter(|e| e.1 % 2 == 1 && edges.original[e.0 as usize] == 2).map(|e| e.0).collect()
+        edges.per_cluster[c].iter().filter(|e| (e.1 - e.2) % 2 == 1).map(|e| e.0).collect()
     };
     for c in 0..file.clusters.len() {
         let own = file.clusters[c].own_group;
@@ -141,7 +141,7 @@ pub(crate) fn conditioning(
     out.locked_original_edges = edges.original.iter().filter(|&&n| n != 0 && n != 2).count() as u64;
     for (c, list) in edges.per_cluster.iter().enumerate() {
         let l = level_of(c) as i64;
-        for &(e, _) in list {
+        for &(e, _, _) in list {
             if age[e as usize] >= 0 && edges.original[e as usize] == 2 {
                 age[e as usize] = age[e as usize].max(l);
             }

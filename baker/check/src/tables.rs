@@ -55,17 +55,30 @@ impl Default for Thresholds {
 
 /// Edge tables of a decoded file.
 pub(crate) struct Edges {
-    /// Per cluster: (edge id, uses within the cluster).
-    pub(crate) per_cluster: Vec<Vec<(u32, u8)>>,
+    /// Per cluster: (edge id, uses within the cluster, marked uses among them).
+    pub(crate) per_cluster: Vec<Vec<(u32, u8, u8)>>,
     /// Uses of each edge in the original (level-0) mesh.
     pub(crate) original: Vec<u32>,
-    /// Expected uses of each edge in a crack-free cut: the original's count for open and
-    /// non-manifold original edges, 0 (meaning "any even count") otherwise.
-    pub(crate) expected: Vec<u8>,
-    /// Original edges whose count is not 2: they must appear in every cut.
-    pub(crate) special: Vec<u32>,
     /// Edge id → the two grid positions (for messages).
     pub(crate) ends: Vec<([i32; 3], [i32; 3])>,
+}
+
+/// A cluster's triangle edges as (key by welded position id, marked), sorted.
+fn cluster_edges(c: &mres_format::DecodedCluster, ids: &[u32]) -> Vec<(u64, bool)> {
+    let mut keys: Vec<(u64, bool)> = c
+        .indices
+        .chunks_exact(3)
+        .enumerate()
+        .flat_map(|(t, tri)| {
+            let mask = c.open_edges.get(t).copied().unwrap_or(0);
+            (0..3).map(move |k| {
+                let key = mres_geom::edges::edge_key(ids[tri[k] as usize], ids[tri[(k + 1) % 3] as usize]);
+                (key, mask >> k & 1 != 0)
+            })
+        })
+        .collect();
+    keys.sort_unstable();
+    keys
 }
 
 /// Welds every cluster's edges by grid position across the file and counts their uses.
@@ -73,7 +86,7 @@ pub(crate) fn edge_tables(file: &MresFile, decoded: &[mres_format::DecodedCluste
     // Weld by grid position across the whole file.
     let mut position_id: FxHashMap<[i32; 3], u32> = FxHashMap::default();
     let mut positions = Vec::new();
-    let mut keys_per_cluster: Vec<Vec<u64>> = Vec::with_capacity(decoded.len());
+    let mut keys_per_cluster: Vec<Vec<(u64, bool)>> = Vec::with_capacity(decoded.len());
     for c in decoded {
         let ids: Vec<u32> = c
             .positions
@@ -85,32 +98,31 @@ pub(crate) fn edge_tables(file: &MresFile, decoded: &[mres_format::DecodedCluste
                 })
             })
             .collect();
-        keys_per_cluster.push(mres_geom::edges::sorted_edge_keys(&c.indices, |i| ids[i as usize]));
+        keys_per_cluster.push(cluster_edges(c, &ids));
     }
-    let mut all: Vec<u64> = keys_per_cluster.iter().flatten().copied().collect();
+    let mut all: Vec<u64> = keys_per_cluster.iter().flatten().map(|k| k.0).collect();
     all.par_sort_unstable();
     all.dedup();
     let id_of = |k: u64| all.binary_search(&k).unwrap_or(0) as u32;
-    let per_cluster: Vec<Vec<(u32, u8)>> = keys_per_cluster
+    let per_cluster: Vec<Vec<(u32, u8, u8)>> = keys_per_cluster
         .par_iter()
-        .map(|keys| keys.chunk_by(|a, b| a == b).map(|run| (id_of(run[0]), run.len().min(255) as u8)).collect())
+        .map(|keys| {
+            keys.chunk_by(|a, b| a.0 == b.0)
+                .map(|run| {
+                    let marked = run.iter().filter(|k| k.1).count();
+                    (id_of(run[0].0), run.len().min(255) as u8, marked.min(255) as u8)
+                })
+                .collect()
+        })
         .collect();
-    let mut expected = vec![0u8; all.len()];
     let mut original = vec![0u32; all.len()];
     for (c, info) in file.clusters.iter().enumerate() {
         if info.own_group == NO_GROUP {
-            for &(e, n) in &per_cluster[c] {
+            for &(e, n, _) in &per_cluster[c] {
                 original[e as usize] += n as u32;
             }
         }
     }
-    let mut special = Vec::new();
-    for (e, &n) in original.iter().enumerate() {
-        if n != 0 && n != 2 {
-            expected[e] = n.min(255) as u8;
-            special.push(e as u32);
-        }
-    }
     let ends = all.iter().map(|k| (positions[(k >> 32) as usize], positions[(k & 0xffff_ffff) as usize])).collect();
-    Edges { per_cluster, original, expected, special, ends }
+    Edges { per_cluster, original, ends }
 }

@@ -2,15 +2,18 @@
 //! (monotone errors, nested spheres), §3 (well-conditioned DAG, in `conditioning`), §4 (honest
 //! errors, in `honesty`) and §5 (format integrity).
 //!
-//! Crack check: the original surface is the union of the level-0 clusters. Edges are welded by
-//! grid position. A cut is crack-free iff the original's open and non-manifold edges appear in
-//! it exactly as often as in the original, and every other edge it uses is used an even number
-//! of times: twice, or four times where simplification pinched a thin part into one edge (not a
-//! crack; counted and reported). A hole or T-junction shows as an odd count along its rim. A
-//! cluster drawn together with one of its parents (overlap) is caught directly: no selected
-//! cluster may be a member of the group that produced another selected cluster. Each cluster's
-//! edges are precomputed as (edge id, multiplicity) so that a cut costs one counter increment
-//! per distinct cluster edge.
+//! Crack check (docs/INVARIANTS.md §1): edges are welded by grid position, and each triangle
+//! edge is marked (it lies on the surface's open border) or not. For a set of clusters let U(e)
+//! be the unmarked and M(e) the marked uses of edge e. (a) At level 0, M(e) = (U(e) + M(e))
+//! mod 2: the original's odd edges carry one mark each. (b) Each simplified group keeps its
+//! border: the edges its members use an odd number of times unmarked are exactly those its
+//! outputs do, and its outputs mark an edge at most once. (c) In every cut, U(e) is even (twice,
+//! or four times where simplification pinched a thin part into one edge: not a crack; counted
+//! and reported) and M(e) ≤ 1. A hole or T-junction shows as an unmarked odd count along its
+//! rim; a wrongly set or cleared mark breaks (a), (b) or (c). A cluster drawn together with one
+//! of its parents (overlap) is caught directly: no selected cluster may be a member of the group
+//! that produced another selected cluster. Each cluster's edges are precomputed as (edge id,
+//! uses, marked uses) so that a cut costs one counter increment per distinct cluster edge.
 
 use crate::conditioning::{conditioning, Conditioning};
 use crate::honesty::Honesty;
@@ -220,7 +223,12 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
         });
     }
 
-    // Crack-free cuts (§1).
+    // Open-border marks (§1 (a), (b)).
+    for p in mark_problems(file, &edges) {
+        report.violation(max, || p);
+    }
+
+    // Crack-free cuts (§1 (c)).
     let mut thresholds: Vec<f32> = groups.iter().map(|g| g.error).filter(|e| e.is_finite()).collect();
     thresholds.push(0.0);
     thresholds.sort_by(f32::total_cmp);
@@ -273,55 +281,117 @@ struct CutCheck {
     pinched: u64,
 }
 
-/// Checks one cut: edge counts (see the module doc) and direct parent/child overlap.
+/// Checks the open-border marks of level 0 and of every simplified group (see the module doc,
+/// (a) and (b)); one message per broken cluster set.
+fn mark_problems(file: &MresFile, edges: &Edges) -> Vec<String> {
+    let n = file.clusters.len();
+    let level0: Vec<u32> = (0..n as u32).filter(|&c| file.clusters[c as usize].own_group == NO_GROUP).collect();
+    let mut problems = Vec::new();
+    let (uses, marks) = tally(edges, &level0);
+    let mut wrong: Vec<u32> = uses.iter().filter(|(e, u)| marks.get(*e).copied().unwrap_or(0) != *u % 2).map(|e| *e.0).collect();
+    wrong.sort_unstable();
+    if let Some(&e) = wrong.first() {
+        let (a, b) = edges.ends[e as usize];
+        problems.push(format!(
+            "level 0: {} edges marked wrongly, first {a:?}-{b:?} used {}x with {} marks (open-border marks)",
+            wrong.len(),
+            uses[&e],
+            marks.get(&e).copied().unwrap_or(0)
+        ));
+    }
+    let mut outputs: Vec<Vec<u32>> = vec![Vec::new(); file.groups.len()];
+    for (c, info) in file.clusters.iter().enumerate() {
+        if info.own_group != NO_GROUP {
+            outputs[info.own_group as usize].push(c as u32);
+        }
+    }
+    let group_problems: Vec<String> = (0..file.groups.len())
+        .into_par_iter()
+        .filter(|&g| file.groups[g].error.is_finite())
+        .filter_map(|g| {
+            let group = &file.groups[g];
+            let members: Vec<u32> = (group.first_cluster..group.first_cluster + group.cluster_count).collect();
+            group_border_problem(edges, g, &members, &outputs[g])
+        })
+        .collect();
+    problems.extend(group_problems);
+    problems
+}
+
+/// Per edge, the uses and the marked uses by `clusters`.
+fn tally(edges: &Edges, clusters: &[u32]) -> (FxHashMap<u32, u32>, FxHashMap<u32, u32>) {
+    let (mut uses, mut marks) = (FxHashMap::default(), FxHashMap::default());
+    for &c in clusters {
+        for &(e, n, m) in &edges.per_cluster[c as usize] {
+            *uses.entry(e).or_insert(0) += n as u32;
+            if m > 0 {
+                *marks.entry(e).or_insert(0) += m as u32;
+            }
+        }
+    }
+    (uses, marks)
+}
+
+/// The edges `clusters` use an odd number of times unmarked, sorted.
+fn unmarked_odd(uses: &FxHashMap<u32, u32>, marks: &FxHashMap<u32, u32>) -> Vec<u32> {
+    let mut odd: Vec<u32> =
+        uses.iter().filter(|(e, u)| (**u - marks.get(*e).copied().unwrap_or(0)) % 2 == 1).map(|(e, _)| *e).collect();
+    odd.sort_unstable();
+    odd
+}
+
+/// (b) for group `g`: its outputs keep its members' unmarked odd edges and mark no edge twice.
+fn group_border_problem(edges: &Edges, g: usize, members: &[u32], outputs: &[u32]) -> Option<String> {
+    let (in_uses, in_marks) = tally(edges, members);
+    let (out_uses, out_marks) = tally(edges, outputs);
+    let (before, after) = (unmarked_odd(&in_uses, &in_marks), unmarked_odd(&out_uses, &out_marks));
+    if before != after {
+        let e = before.iter().chain(&after).find(|e| before.binary_search(e).is_err() || after.binary_search(e).is_err())?;
+        let (a, b) = edges.ends[*e as usize];
+        return Some(format!(
+            "group {g}: its outputs change its border at edge {a:?}-{b:?} (unmarked odd in members: {}, in outputs: {}) (open-border marks)",
+            before.binary_search(e).is_ok(),
+            after.binary_search(e).is_ok()
+        ));
+    }
+    let (e, m) = out_marks.iter().filter(|(_, m)| **m > 1).min()?;
+    let (a, b) = edges.ends[*e as usize];
+    Some(format!("group {g}: its outputs mark edge {a:?}-{b:?} {m} times (open-border marks)"))
+}
+
+/// Checks one cut: edge counts (see the module doc, (c)) and direct parent/child overlap.
 fn check_cut(
     edges: &Edges,
     cut: &[u32],
     groups: &[mres_format::Group],
     clusters: &[mres_format::ClusterInfo],
 ) -> CutCheck {
-    let mut count: FxHashMap<u32, u32> = FxHashMap::default();
-    for &c in cut {
-        for &(e, n) in &edges.per_cluster[c as usize] {
-            *count.entry(e).or_insert(0) += n as u32;
-        }
-    }
-    let mut problems = Vec::new();
-    let mut describe = |e: u32, got: u32| {
-        if problems.len() < 3 {
-            let owners: Vec<String> = cut
-                .iter()
-                .filter(|&&c| edges.per_cluster[c as usize].iter().any(|x| x.0 == e))
-                .map(|&c| format!("cluster {c} (group {})", clusters[c as usize].group))
-                .collect();
-            let (a, b) = edges.ends[e as usize];
-            let expected = match edges.expected[e as usize] {
-                0 => "an even count".to_string(),
-                n => format!("{n}x"),
-            };
-            problems.push(format!("edge {a:?}-{b:?} used {got}x, expected {expected}, in [{}]", owners.join(", ")));
-        } else {
-            problems.push(String::new());
-        }
-    };
-    let mut bad: Vec<(u32, u32)> = count
+    let (uses, marks) = tally(edges, cut);
+    let marked = |e: u32| marks.get(&e).copied().unwrap_or(0);
+    let mut bad: Vec<(u32, u32, u32)> = uses
         .iter()
-        .filter(|(e, n)| match edges.expected[**e as usize] {
-            0 => **n % 2 != 0,
-            x => **n != x as u32,
-        })
-        .map(|(e, n)| (*e, *n))
+        .map(|(e, n)| (*e, *n - marked(*e), marked(*e)))
+        .filter(|(_, unmarked, m)| unmarked % 2 != 0 || *m > 1)
         .collect();
     bad.sort_unstable();
-    for (e, n) in bad {
-        describe(e, n);
-    }
-    for &e in &edges.special {
-        if !count.contains_key(&e) {
-            describe(e, 0);
+    let mut problems = Vec::new();
+    for &(e, unmarked, m) in &bad {
+        if problems.len() >= 3 {
+            problems.push(String::new());
+            continue;
         }
+        let owners: Vec<String> = cut
+            .iter()
+            .filter(|&&c| edges.per_cluster[c as usize].iter().any(|x| x.0 == e))
+            .map(|&c| format!("cluster {c} (group {})", clusters[c as usize].group))
+            .collect();
+        let (a, b) = edges.ends[e as usize];
+        problems.push(format!(
+            "edge {a:?}-{b:?} used {unmarked}x unmarked and {m}x marked (expected an even count and at most one mark), in [{}]",
+            owners.join(", ")
+        ));
     }
-    let pinched = count.iter().filter(|(e, n)| edges.expected[**e as usize] == 0 && **n >= 4).count() as u64;
+    let pinched = uses.iter().filter(|(e, n)| **n - marked(**e) >= 4).count() as u64;
     // Overlap: a selected cluster together with a member of the group that produced it.
     let mut selected = vec![false; clusters.len()];
     for &c in cut {

@@ -25,6 +25,7 @@
 //!     uvs: Vec::new(),
 //!     indices: vec![0, 1, 2],
 //!     materials: Vec::new(),
+//!     open_edges: vec![0b111], // a lone triangle: all three edges are open
 //! };
 //! let sphere = Sphere { center: [0.5, 0.5, 0.0], radius: 1.0 };
 //! let group = |error, level| Group { sphere, error, level, first_cluster: 0, cluster_count: 0, page: 0 };
@@ -75,7 +76,7 @@ pub use write::write_mres;
 /// File magic, the first four bytes.
 pub const MAGIC: [u8; 4] = *b"MRES";
 /// Format version written by this crate; readers reject any other.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Size of the fixed header in bytes.
 pub const HEADER_SIZE: usize = 160;
 /// Size of one group record in the hierarchy section.
@@ -282,6 +283,9 @@ pub struct DagCluster {
     pub indices: Vec<u8>,
     /// Material per triangle (with [`FLAG_MATERIALS`]).
     pub materials: Vec<u16>,
+    /// Open-edge marks per triangle (bit k: the edge from corner k to corner (k+1) mod 3 lies
+    /// on the cut's open border; docs/INVARIANTS.md §1), or empty when no edge is marked.
+    pub open_edges: Vec<u8>,
 }
 
 impl Dag {
@@ -305,6 +309,7 @@ impl Dag {
                 positions,
                 indices: vec![0, 1, 2, 1, 3, 2],
                 materials: vec![material, material + 1],
+                open_edges: vec![0b101, 0b011],
             }
         };
         let mut clusters: Vec<DagCluster> = (0..4).map(|i| cluster(i * 100, 0, NO_GROUP, i as u16)).collect();

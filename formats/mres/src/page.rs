@@ -40,6 +40,9 @@ pub struct DecodedCluster {
     pub indices: Vec<u8>,
     /// Material per triangle (empty without [`FLAG_MATERIALS`]).
     pub materials: Vec<u16>,
+    /// Open-edge marks, one per triangle (bit k: the edge from corner k to corner (k+1) mod 3
+    /// is marked; all zero when the cluster has no open-edge block).
+    pub open_edges: Vec<u8>,
 }
 
 /// Checks page `p`'s compressed bytes against its table entry (length, then checksum) and
@@ -102,6 +105,7 @@ pub(crate) fn read_cluster(
         uvs: if h.flags & FLAG_UVS != 0 { blocks.uvs()? } else { Vec::new() },
         indices: blocks.indices()?,
         materials: if h.flags & FLAG_MATERIALS != 0 { blocks.materials()? } else { Vec::new() },
+        open_edges: blocks.open_edges()?,
     };
     Ok((head, cluster))
 }
@@ -121,6 +125,9 @@ fn cluster_header(h: &Header, raw: &[u8], info: &ClusterInfo, index: u32) -> Res
     }
     if h.flags & FLAG_NORMALS != 0 && head.normal_bits.iter().any(|&b| b as u32 > h.normal_bits) {
         return Err(bad("normal bit width over the header's normal_bits"));
+    }
+    if head.edge_flags & !ClusterHeader::OPEN_EDGES != 0 {
+        return Err(bad("unknown edge_flags bits"));
     }
     Ok(head)
 }
@@ -200,6 +207,26 @@ impl Blocks<'_> {
             return Err(self.bad("local index out of range"));
         }
         Ok(indices.to_vec())
+    }
+
+    /// The open-edge block right after the indices block's padding (FORMAT.md §5, "Open
+    /// edges"): 3 bits per triangle, the last word's unused bits zero.
+    fn open_edges(&self) -> Result<Vec<u8>, MresError> {
+        let triangles = self.head.triangle_count as u64;
+        if self.head.edge_flags & ClusterHeader::OPEN_EDGES == 0 {
+            return Ok(vec![0; triangles as usize]);
+        }
+        let start = self.head.block_offsets[ClusterHeader::INDICES] as u64 + (triangles * 3).next_multiple_of(4);
+        let len = (triangles * 3).div_ceil(32) * 4;
+        let bytes = section(self.raw, start, len, &format!("cluster {} open edges", self.index))?;
+        let marks: Vec<u8> = (0..triangles)
+            .map(|t| read_bits(bytes, t * 3, 3).map(|m| m as u8).ok_or_else(|| self.bad("open edges")))
+            .collect::<Result<_, _>>()?;
+        let used = triangles * 3;
+        if read_bits(bytes, used, (len * 8 - used) as u32 % 32).is_some_and(|rest| rest != 0) {
+            return Err(self.bad("open edges: unused bits are not zero"));
+        }
+        Ok(marks)
     }
 
     fn materials(&self) -> Result<Vec<u16>, MresError> {

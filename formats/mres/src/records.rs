@@ -396,6 +396,8 @@ pub struct ClusterHeader {
     pub normal_min: [u16; 2],
     /// Bits per octahedral coordinate.
     pub normal_bits: [u8; 2],
+    /// Bit 0 ([`ClusterHeader::OPEN_EDGES`]): an open-edge block follows the indices block.
+    pub edge_flags: u8,
 }
 
 impl ClusterHeader {
@@ -413,8 +415,10 @@ impl ClusterHeader {
     pub const NORMAL_MIN: usize = 40;
     /// Offset of `normal_bits`.
     pub const NORMAL_BITS: usize = 44;
-    /// Offset of the reserved byte after `position_bits` (zero).
-    pub const RESERVED_1: usize = 19;
+    /// Offset of `edge_flags`.
+    pub const EDGE_FLAGS: usize = 19;
+    /// `edge_flags` bit: the cluster has an open-edge block (FORMAT.md §5, "Open edges").
+    pub const OPEN_EDGES: u8 = 1;
     /// Offset of the reserved u16 at the end (zero).
     pub const RESERVED_2: usize = 46;
     /// Index in `block_offsets` of the positions block.
@@ -444,6 +448,7 @@ impl ClusterHeader {
             put(&mut b, Self::NORMAL_MIN + 2 * k, &self.normal_min[k].to_le_bytes());
         }
         put(&mut b, Self::NORMAL_BITS, &self.normal_bits);
+        b[Self::EDGE_FLAGS] = self.edge_flags;
         b
     }
 
@@ -457,6 +462,7 @@ impl ClusterHeader {
             block_offsets: std::array::from_fn(|k| u32_at(b, Self::POSITIONS_OFFSET + 4 * k)),
             normal_min: std::array::from_fn(|k| u16_at(b, Self::NORMAL_MIN + 2 * k)),
             normal_bits: take(b, Self::NORMAL_BITS),
+            edge_flags: b[Self::EDGE_FLAGS],
         }
     }
 }
@@ -482,9 +488,8 @@ mod tests {
         let mut g = pattern::<GROUP_RECORD_SIZE>();
         g[GroupRecord::RESERVED..].fill(0);
         assert_eq!(GroupRecord::encode(&GroupRecord::decode(&g)), g);
-        // Likewise the cluster header's two reserved fields.
+        // Likewise the cluster header's reserved field.
         let mut ch = pattern::<CLUSTER_HEADER_SIZE>();
-        ch[ClusterHeader::RESERVED_1] = 0;
         ch[ClusterHeader::RESERVED_2..].fill(0);
         assert_eq!(ClusterHeader::decode(&ch).encode(), ch);
     }

@@ -446,6 +446,9 @@ fn encode_blocks(c: &DagCluster, h: &Header, index: usize) -> Result<(ClusterHea
     if let Some(i) = c.indices.iter().find(|&&i| i as usize >= vertex_count) {
         return Err(bad(format!("index {i} out of {vertex_count} vertices")));
     }
+    if !c.open_edges.is_empty() && (c.open_edges.len() != triangle_count || c.open_edges.iter().any(|&m| m > 7)) {
+        return Err(bad("open-edge marks: one 3-bit mask per triangle expected".into()));
+    }
     let with = |flag: u32, len: usize, per: usize| (flags & flag == 0) || len == per;
     if !with(FLAG_NORMALS, c.normals.len(), vertex_count)
         || !with(FLAG_UVS, c.uvs.len(), vertex_count)
@@ -463,6 +466,7 @@ fn encode_blocks(c: &DagCluster, h: &Header, index: usize) -> Result<(ClusterHea
         block_offsets: [0; BLOCK_KINDS],
         normal_min: [0; 2],
         normal_bits: [0; 2],
+        edge_flags: 0,
     };
     let mut blocks: Blocks = Default::default();
     blocks[ClusterHeader::POSITIONS] = Some(packed);
@@ -476,11 +480,28 @@ fn encode_blocks(c: &DagCluster, h: &Header, index: usize) -> Result<(ClusterHea
         blocks[ClusterHeader::UVS] =
             Some(c.uvs.iter().flat_map(|uv| h.uv.quantize(*uv)).flat_map(u16::to_le_bytes).collect());
     }
-    blocks[ClusterHeader::INDICES] = Some(c.indices.clone());
+    blocks[ClusterHeader::INDICES] = Some(indices_block(c, &mut header));
     if flags & FLAG_MATERIALS != 0 {
         blocks[ClusterHeader::MATERIALS] = Some(c.materials.iter().flat_map(|m| m.to_le_bytes()).collect());
     }
     Ok((header, blocks))
+}
+
+/// The indices block: the local indices, followed (after padding to 4 bytes) by the open-edge
+/// block when any edge is marked, which `edge_flags` then announces (FORMAT.md §5, "Open
+/// edges"). The marks sit right after the indices, so they need no offset field of their own.
+fn indices_block(c: &DagCluster, header: &mut ClusterHeader) -> Vec<u8> {
+    let mut block = c.indices.clone();
+    if c.open_edges.iter().any(|&m| m != 0) {
+        header.edge_flags |= ClusterHeader::OPEN_EDGES;
+        block.resize(block.len().next_multiple_of(4), 0);
+        let mut bits = BitWriter::default();
+        for &m in &c.open_edges {
+            bits.push(m as u32, 3);
+        }
+        block.extend(words_to_bytes(&bits.finish()));
+    }
+    block
 }
 
 /// Packs N-component integer vectors as offsets from their per-component minimum, each

@@ -45,6 +45,7 @@ fn round_trip_is_exact() {
                 uvs: d.uvs,
                 indices: d.indices,
                 materials: d.materials,
+                open_edges: d.open_edges,
             })
             .collect(),
     };
@@ -82,8 +83,8 @@ fn every_flipped_byte_is_an_error() {
 fn typed_errors() {
     let bytes = write_mres(&sample_dag(), 3).unwrap();
     let mut v = bytes.clone();
-    v[4] = 2;
-    assert_eq!(MresFile::parse(v).unwrap_err(), MresError::WrongVersion { found: 2 });
+    v[4] = 1; // version 1 had no open-edge marks
+    assert_eq!(MresFile::parse(v).unwrap_err(), MresError::WrongVersion { found: 1 });
     let mut v = bytes.clone();
     v[0] = b'X';
     assert_eq!(MresFile::parse(v).unwrap_err(), MresError::BadMagic);
@@ -136,6 +137,7 @@ fn multi_page_dag(n: u32) -> Dag {
         uvs: Vec::new(),
         indices: (0..384).map(|i| ((i * 7) % 256) as u8).collect(),
         materials: (0..128).map(|t| t as u16).collect(),
+        open_edges: (0..128).map(|t| (t % 8) as u8).collect(),
     };
     let mut clusters: Vec<DagCluster> = (0..n).map(|g| cluster(g, NO_GROUP)).collect();
     clusters.extend((0..n).map(|g| cluster(n, g)));
