@@ -209,30 +209,6 @@ def edge_uses(c):
             yield t, k, (min(a, b), max(a, b))
 
 
-def level0_counts(data):
-    counts = {}
-    for c in all_clusters(data):
-        if cluster(data, c["index"])["own"] == NONE:
-            for _, _, key in edge_uses(c):
-                counts[key] = counts.get(key, 0) + 1
-    return counts
-
-
-def promote_to_v2(data):
-    """A version-1 bake kept the level-0 mesh's open edges (used once) locked at
-    every level, so marking every use of them gives a valid version-2 file
-    (used only while the baker still writes version 1)."""
-    open_edges = {k for k, n in level0_counts(data).items() if n == 1}
-    assert not any(n > 2 and n % 2 for n in level0_counts(data).values()), "odd non-manifold edges"
-    for p in range(header(data)["P"]):
-        cls = decode_page(data, p)
-        for c in cls:
-            for t, k, key in edge_uses(c):
-                if key in open_edges:
-                    c["marks"][t] |= 1 << k
-        replace_page(data, p, cls, version=2)
-
-
 # --------------------------------------------------------------------------
 # fixtures
 # --------------------------------------------------------------------------
@@ -250,15 +226,10 @@ def baked(tmp_path_factory):
     out = d / "out"
     subprocess.run([str(BAKE_ALL), str(meshes), "-o", str(out), "-j", "1"], check=True, capture_output=True)
     files = {k: out / f"{k}.mres" for k in ("sphere", "terrain", "boxes")}
-    promoted = False
     for f in files.values():
         assert f.exists(), f
-        data = bytearray(f.read_bytes())
-        if struct.unpack_from("<I", data, 4)[0] == 1:
-            promote_to_v2(data)
-            f.write_bytes(bytes(data))
-            promoted = True
-    return d, files, promoted
+        assert struct.unpack_from("<I", f.read_bytes(), 4)[0] == 2, f"{f}: not format version 2 (stale build?)"
+    return d, files
 
 
 def run_checker(*args):
@@ -268,7 +239,7 @@ def run_checker(*args):
 
 
 def corrupted(baked, name, tag, mutate):
-    d, files, _ = baked
+    d, files = baked
     data = bytearray(files[name].read_bytes())
     mutate(data)
     path = d / f"{name}-{tag}.mres"
@@ -288,7 +259,7 @@ def assert_caught(proc, kind):
 # --------------------------------------------------------------------------
 
 def test_valid_files_pass_and_agree_with_rust_validator(baked):
-    _, files, promoted = baked
+    _, files = baked
     proc = run_checker(*files.values(), "--json", *FAST)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     reports = [json.loads(line) for line in proc.stdout.splitlines() if line.strip()]
@@ -298,8 +269,6 @@ def test_valid_files_pass_and_agree_with_rust_validator(baked):
         assert rep["uniform_cuts"] >= 2 and rep["random_cuts"] == 20 and rep["trimesh_cuts"] >= 2
     # the terrain's rim is open: its level 0 and its cuts carry marks
     assert reports[1]["level0_marked_edges"] > 0 and reports[0]["level0_marked_edges"] == 0
-    if promoted:
-        pytest.skip("the Rust baker still writes version 1 (promoted here); its validator cannot read these")
     for rep, path in zip(reports, files.values()):
         rust = json.loads(subprocess.run([str(MRES), "validate", str(path), "--json", "--random-cuts", "10"],
                                          check=True, capture_output=True, text=True).stdout)
@@ -315,7 +284,7 @@ def test_valid_files_pass_and_agree_with_rust_validator(baked):
 
 
 def test_text_output_and_source_distance(baked):
-    d, files, _ = baked
+    d, files = baked
     proc = run_checker(files["sphere"], "--source", d / "meshes" / "sphere.obj", *FAST)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "PASS" in proc.stdout and "source distance" in proc.stdout
@@ -327,7 +296,7 @@ def test_text_output_and_source_distance(baked):
 
 
 def test_missing_file_is_io_error(baked):
-    d, _, _ = baked
+    d, _ = baked
     proc = run_checker(d / "does-not-exist.mres")
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
@@ -470,7 +439,7 @@ def test_out_of_range_index_is_reported(baked):
 
 
 def test_one_bad_file_among_good_ones_exits_1(baked):
-    _, files, promoted = baked
+    _, files = baked
 
     def mutate(data):
         data[4] = 3  # version
@@ -514,7 +483,7 @@ def test_cut_rule_unmarked_even_marked_at_most_once():
 
 def test_overlapping_levels_are_caught(baked):
     import numpy as np
-    _, files, _ = baked
+    _, files = baked
     ch, rep = load_checker(files["sphere"])
     level0 = ch.clevel == 0
     assert ch.check_overlap("test cut", level0)
@@ -600,7 +569,7 @@ def test_hole_fails_level0_and_cut_rules(baked):
 def test_dropped_cluster_breaks_the_cut(baked):
     """The cut at the second uniform threshold without one of its clusters."""
     import numpy as np
-    _, files, _ = baked
+    _, files = baked
     ch, rep = load_checker(files["sphere"])
     sel = ch.uniform_sel(ch.T[1])
     assert ch.check_cut("full cut", sel) and not rep.violations
