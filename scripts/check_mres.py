@@ -1596,6 +1596,8 @@ def print_report(rep, out):
             head.append(f"{k}={f[k]}")
     if "level0_fill" in f:
         head.append(f"level0_fill={f['level0_fill']:.2f}")
+    if "level0_marked_edges" in f:
+        head.append(f"level0_marked_edges={f['level0_marked_edges']}")
     for k in ("uniform_cuts", "random_cuts", "trimesh_cuts"):
         if k in f:
             head.append(f"{k}={f[k]}")
