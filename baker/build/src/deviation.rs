@@ -60,6 +60,9 @@ pub struct Reference<'a> {
     /// The largest own error among the group's members: the stored error is at least this
     /// (monotone errors), and the outlier test counts only what the step adds beyond it.
     pub members_error: f32,
+    /// With `triangles` the level-0 triangles under the group: the whole original surface,
+    /// which output samples are measured against.
+    pub original: Option<&'a Original>,
 }
 
 /// Simplifies a group (`simplify_group` on `input` with open-border `masks`) and measures its
@@ -78,7 +81,8 @@ pub fn simplify_measured(
 ) -> Option<(Simplified, f32)> {
     let (members, triangles, errors) = (reference.members_error, reference.triangles, &reference.errors);
     let error_of = |s: &Simplified, hot_above: Option<f64>| {
-        let (total, hot) = measure(mesh, triangles, errors, &s.indices, part_size, s.error as f64, hot_above);
+        let (total, hot) =
+            measure(mesh, triangles, errors, &s.indices, part_size, s.error as f64, hot_above, reference.original);
         (stored(total, s.error).max(members), hot)
     };
     let mut best = simplify_group(mesh, input, masks, &locked, settings)?;
@@ -119,7 +123,8 @@ pub fn assign_owned(mesh: &WeldedMesh, owned: &[u32], children: &[Vec<u32>]) -> 
     let point = |v: u32| mesh.positions[v as usize];
     let tris: Vec<Triangle<f32>> =
         children.iter().flat_map(|c| c.chunks_exact(3).map(|t| [point(t[0]), point(t[1]), point(t[2])])).collect();
-    let child_of: Vec<usize> = children.iter().enumerate().flat_map(|(i, c)| std::iter::repeat_n(i, c.len() / 3)).collect();
+    let child_of: Vec<usize> =
+        children.iter().enumerate().flat_map(|(i, c)| std::iter::repeat_n(i, c.len() / 3)).collect();
     let bvh = Bvh::new(&tris);
     let mut out = vec![Vec::new(); children.len()];
     let mut hint = usize::MAX;
@@ -144,8 +149,30 @@ pub fn group_error(
     simplifier_error: f32,
 ) -> f32 {
     let errors = vec![members_error; input.len() / 3];
-    let (total, _) = measure(mesh, input, &errors, output, part_size, simplifier_error as f64, None);
+    let (total, _) = measure(mesh, input, &errors, output, part_size, simplifier_error as f64, None, None);
     stored(total, simplifier_error).max(members_error)
+}
+
+/// The whole level-0 surface of a welded mesh, in object coordinates, for measuring output
+/// samples against (see `measure`).
+pub struct Original {
+    tris: Vec<Triangle<f32>>,
+    bvh: Bvh<f32>,
+    /// Bound on the f32 rounding of a distance at these coordinates.
+    slack: f64,
+}
+
+impl Original {
+    /// The level-0 triangles of `mesh` (its `indices`).
+    pub fn new(mesh: &WeldedMesh) -> Original {
+        let p = |v: u32| mesh.positions[v as usize];
+        let tris: Vec<Triangle<f32>> = mesh.indices.chunks_exact(3).map(|t| [p(t[0]), p(t[1]), p(t[2])]).collect();
+        let largest = mesh.positions.iter().flatten().fold(0.0f32, |m, &x| m.max(x.abs()));
+        // Rounding of the subtractions, products and sums: a few dozen ulps of the largest
+        // coordinate (far below the position grid's step).
+        let slack = 64.0 * f32::EPSILON as f64 * largest as f64;
+        Original { bvh: Bvh::new(&tris), tris, slack }
+    }
 }
 
 /// `total` rounded up to f32, and at least `simplifier_error`.
@@ -177,6 +204,12 @@ fn stored(total: f64, simplifier_error: f32) -> f32 {
 /// are kept by the caller); a corner or edge that several input triangles share is sampled
 /// once, with the largest of their errors. Distances are found in f32 around the group's centre
 /// and rounded up by a bound on that arithmetic's error (far below the position grid's step).
+///
+/// With `original` (the whole level-0 surface of this mesh), output samples are measured
+/// against all of it rather than `input`: near the group border the level-0 triangles under the
+/// group (handed down by nearest cluster) need not cover the output exactly, and the distance to
+/// the original surface is what a viewer sees (and what the validator measures).
+#[allow(clippy::too_many_arguments)]
 fn measure(
     mesh: &WeldedMesh,
     input: &[u32],
@@ -185,6 +218,7 @@ fn measure(
     part_size: &[f32],
     floor: f64,
     hot_above: Option<f64>,
+    original: Option<&Original>,
 ) -> (f64, Vec<u32>) {
     let id = |v: u32| mesh.position_ids[v as usize];
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
@@ -233,17 +267,37 @@ fn measure(
 
     // Output → input: the nearest input triangle's member error (any member's, until found
     // exactly).
-    let input_bvh = Bvh::new(&input_tris);
-    let mut hint = usize::MAX;
-    for ((t, tri), &duty) in output.chunks_exact(3).zip(&output_tris).zip(&output_duty) {
-        for p in samples(*tri, duty) {
-            let enough = enough2(worst, largest);
-            let (d2, nearest) = input_bvh.nearest_squared(&input_tris, p, enough, hint);
-            hint = nearest;
-            if d2 > enough {
-                worst = worst.max(total(d2, triangle_errors[nearest] as f64));
-                if hot2.is_some_and(|h| d2 > h) {
-                    hot.extend(input[nearest * 3..nearest * 3 + 3].iter().chain(t).map(|&v| id(v)));
+    if let Some(o) = original {
+        let absolute = |v: u32| mesh.positions[v as usize];
+        let mut hint = usize::MAX;
+        for (t, &duty) in output.chunks_exact(3).zip(&output_duty) {
+            let tri = [absolute(t[0]), absolute(t[1]), absolute(t[2])];
+            for p in samples(tri, duty) {
+                let d = ((worst / SAMPLING_MARGIN - o.slack).max(0.0)) as f32;
+                let enough = hot2.map_or(d * d, |h| h.min(d * d));
+                let (d2, nearest) = o.bvh.nearest_squared(&o.tris, p, enough, hint);
+                hint = nearest;
+                if d2 > enough {
+                    worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + o.slack));
+                    if hot2.is_some_and(|h| d2 > h) {
+                        hot.extend(mesh.indices[nearest * 3..nearest * 3 + 3].iter().chain(t).map(|&v| id(v)));
+                    }
+                }
+            }
+        }
+    } else {
+        let input_bvh = Bvh::new(&input_tris);
+        let mut hint = usize::MAX;
+        for ((t, tri), &duty) in output.chunks_exact(3).zip(&output_tris).zip(&output_duty) {
+            for p in samples(*tri, duty) {
+                let enough = enough2(worst, largest);
+                let (d2, nearest) = input_bvh.nearest_squared(&input_tris, p, enough, hint);
+                hint = nearest;
+                if d2 > enough {
+                    worst = worst.max(total(d2, triangle_errors[nearest] as f64));
+                    if hot2.is_some_and(|h| d2 > h) {
+                        hot.extend(input[nearest * 3..nearest * 3 + 3].iter().chain(t).map(|&v| id(v)));
+                    }
                 }
             }
         }

@@ -7,13 +7,13 @@
 
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopCluster, LOCAL};
-use crate::deviation::{assign_owned, part_sizes, simplify_measured, Reference};
+use crate::deviation::{assign_owned, part_sizes, simplify_measured, Original, Reference};
 use crate::error::BakeError;
+use crate::open;
 use crate::partition::{cluster_graph, partition};
 use crate::progress::Progress;
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Method};
-use crate::open;
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
 use mres_geom::edges::sorted_edge_keys;
@@ -72,6 +72,9 @@ pub(crate) struct Builder<'a> {
     /// Per position id: why it is locked at every level ([`CELL_BORDER`], [`NON_MANIFOLD`]
     /// bits; see `always_locked`).
     always_locked: Vec<u8>,
+    /// The whole level-0 surface, when the pending clusters started at level 0 and errors are
+    /// measured (see `deviation::Original`).
+    original: Option<Original>,
     /// Per position id, the size of its connected part (see `deviation::part_sizes`).
     part_size: Vec<f32>,
     /// Every cluster built so far, in creation order.
@@ -94,12 +97,15 @@ impl<'a> Builder<'a> {
             ErrorBound::Measured => part_sizes(mesh),
             ErrorBound::Simplifier => Vec::new(),
         };
+        let from_level0 = clusters.iter().all(|c| c.own_group == NO_GROUP && !c.owned.is_empty());
+        let original = (settings.error_bound == ErrorBound::Measured && from_level0).then(|| Original::new(mesh));
         let pending = (0..clusters.len()).collect();
         let stats = BuildStats::default();
         Builder {
             mesh,
             settings,
             always_locked,
+            original,
             part_size,
             clusters,
             groups: Vec::new(),
@@ -185,10 +191,11 @@ impl<'a> Builder<'a> {
                         let reference = if owned.is_empty() {
                             // Against the members, each with its own error (a later shard stage).
                             let errors = members().flat_map(|m| std::iter::repeat_n(m.own_error, m.indices.len() / 3));
-                            Reference { triangles: &merged, errors: errors.collect(), members_error }
+                            Reference { triangles: &merged, errors: errors.collect(), members_error, original: None }
                         } else {
                             // Against the original surface under the group: nothing adds up.
-                            Reference { triangles: &owned, errors: vec![0.0; owned.len() / 3], members_error }
+                            let errors = vec![0.0; owned.len() / 3];
+                            Reference { triangles: &owned, errors, members_error, original: self.original.as_ref() }
                         };
                         simplify_measured(mesh, &merged, &masks, &reference, locked, settings, part_size)?
                     }
@@ -200,7 +207,11 @@ impl<'a> Builder<'a> {
                 };
                 let indices = split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings);
                 let open = open::mark(mesh, &indices, &s.needed);
-                let owned = if owned.is_empty() { vec![Vec::new(); indices.len()] } else { assign_owned(mesh, &owned, &indices) };
+                let owned = if owned.is_empty() {
+                    vec![Vec::new(); indices.len()]
+                } else {
+                    assign_owned(mesh, &owned, &indices)
+                };
                 let children = indices
                     .into_iter()
                     .zip(open)
@@ -343,17 +354,21 @@ fn always_locked(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<u8> {
     let (mut edges, mut marked): (Vec<u64>, Vec<u64>) = clusters
         .par_iter()
         .map(|c| (sorted_edge_keys(&c.indices, id), open::marked_edges(mesh, &c.indices, &c.open)))
-        .reduce(|| (Vec::new(), Vec::new()), |mut a, b| {
-            a.0.extend(b.0);
-            a.1.extend(b.1);
-            a
-        });
+        .reduce(
+            || (Vec::new(), Vec::new()),
+            |mut a, b| {
+                a.0.extend(b.0);
+                a.1.extend(b.1);
+                a
+            },
+        );
     edges.par_sort_unstable();
     marked.par_sort_unstable();
     let mut locked = vec![0u8; mesh.position_count];
     for run in edges.chunk_by(|a, b| a == b) {
         let marks = marked.partition_point(|&m| m <= run[0]) - marked.partition_point(|&m| m < run[0]);
-        let why = if (run.len() - marks) % 2 == 1 { CELL_BORDER } else { 0 } | if run.len() >= 3 { NON_MANIFOLD } else { 0 };
+        let why =
+            if (run.len() - marks) % 2 == 1 { CELL_BORDER } else { 0 } | if run.len() >= 3 { NON_MANIFOLD } else { 0 };
         locked[(run[0] >> 32) as usize] |= why;
         locked[(run[0] & 0xffff_ffff) as usize] |= why;
     }

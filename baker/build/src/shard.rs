@@ -29,6 +29,7 @@
 use crate::dag::{BuildStats, BuiltCluster, BuiltDag, Cell, Collected, DagOutput, Frame, StageClock, TopCluster};
 use crate::error::BakeError;
 use crate::levels::{level0, Builder};
+use crate::open;
 use crate::progress::Progress;
 use crate::settings::BakeSettings;
 use crate::source::TriangleSource;
@@ -37,7 +38,6 @@ use mres_format::{Grid, UvQuant, NO_GROUP};
 use mres_import::mesh::bounds;
 use mres_import::mesh::{Corner, NONE};
 use mres_import::SourceMesh;
-use crate::open;
 use rayon::prelude::*;
 use rustc_hash::FxHashSet;
 use std::fs::File;

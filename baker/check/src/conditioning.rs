@@ -104,9 +104,8 @@ pub(crate) fn conditioning(
     // edges are open border, not shared with a neighbour). A cluster whose remaining boundary
     // is empty (a whole closed part, or a part bounded only by open border) has nothing that
     // could have moved and is not compared.
-    let boundary = |c: usize| -> Vec<u32> {
-        edges.per_cluster[c].iter().filter(|e| (e.1 - e.2) % 2 == 1).map(|e| e.0).collect()
-    };
+    let boundary =
+        |c: usize| -> Vec<u32> { edges.per_cluster[c].iter().filter(|e| (e.1 - e.2) % 2 == 1).map(|e| e.0).collect() };
     for c in 0..file.clusters.len() {
         let own = file.clusters[c].own_group;
         if own == NO_GROUP {

@@ -27,6 +27,14 @@ pub struct Honesty {
     pub p99_ratio: f64,
     /// Where the worst ratio was found.
     pub worst: String,
+    /// Groups with samples: per group the largest ratio among the samples on its output
+    /// clusters (cut → original) and the samples whose nearest cut point is on them (original
+    /// → cut). How tight the stored errors are: 1 is exact.
+    pub groups_measured: u64,
+    /// Median over those groups of their largest ratio.
+    pub group_median_ratio: f64,
+    /// 10th percentile of the same.
+    pub group_p10_ratio: f64,
 }
 
 /// A triangle soup with, per triangle, the cluster it came from.
@@ -90,38 +98,59 @@ pub fn measure(file: &MresFile, decoded: &[DecodedCluster], cuts: usize, samples
     // Distances below this are grid rounding, not simplification.
     let floor = file.header.grid.step as f64;
     let mut ratios: Vec<(f64, String)> = Vec::new();
+    // Per group, the largest ratio of a sample attributed to it.
+    let mut per_group = vec![f64::NAN; groups.len()];
+    let mut attribute = |c: u32, r: f64| {
+        let g = file.clusters[c as usize].own_group;
+        if g != NO_GROUP && r.is_finite() {
+            let slot = &mut per_group[g as usize];
+            *slot = if slot.is_nan() { r } else { slot.max(r) };
+        }
+    };
     let mut out = Honesty::default();
     for &t in &thresholds {
         let cut = select::uniform_cut(groups, &file.clusters, t);
         let cut_soup = soup(file, decoded, cut.iter().copied());
         let cut_bvh = Bvh::new(&cut_soup.tris);
         // Cut → original: compare with the drawn cluster's own error.
-        let forward: Vec<(f64, String)> = samples(&cut_soup, samples_per_cut)
+        let forward: Vec<(f64, String, u32)> = samples(&cut_soup, samples_per_cut)
             .par_iter()
             .map(|(p, c, _)| {
                 let d = level0_bvh.distance(&level0.tris, *p);
                 (
                     ratio(d, own_error(*c), floor),
                     format!("cut at {t}: point {p:?} on cluster {c} is {d:.3e} from the original"),
+                    *c,
                 )
             })
             .collect();
         // Original → cut: compare with the largest own error among the drawn clusters that
         // replace the sampled level-0 cluster (its drawn ancestors).
         let bound = drawn_ancestor_error(file, &cut, &own_error);
-        let backward: Vec<(f64, String)> = samples(&level0, samples_per_cut)
+        let backward: Vec<(f64, String, u32)> = samples(&level0, samples_per_cut)
             .par_iter()
             .map(|(p, l, tri)| {
                 // A part that vanished entirely is off by at most its own size on screen.
-                let d = cut_bvh.distance(&cut_soup.tris, *p).min(part_size[*tri]);
+                let (d, nearest) = cut_bvh.nearest(&cut_soup.tris, *p);
+                let d = d.min(part_size[*tri]);
                 let e = bound[*l as usize];
-                (ratio(d, e, floor), format!("cut at {t}: original point {p:?} of cluster {l} is {d:.3e} from the cut, whose clusters there claim {e:.3e}"))
+                let c = cut_soup.cluster.get(nearest).copied().unwrap_or(*l);
+                (ratio(d, e, floor), format!("cut at {t}: original point {p:?} of cluster {l} is {d:.3e} from the cut, whose clusters there claim {e:.3e}"), c)
             })
             .collect();
         out.cuts += 1;
         out.samples += (forward.len() + backward.len()) as u64;
-        ratios.extend(forward);
-        ratios.extend(backward);
+        for (r, at, c) in forward.into_iter().chain(backward) {
+            attribute(c, r);
+            ratios.push((r, at));
+        }
+    }
+    let mut tight: Vec<f64> = per_group.into_iter().filter(|r| !r.is_nan()).collect();
+    tight.sort_by(f64::total_cmp);
+    out.groups_measured = tight.len() as u64;
+    if !tight.is_empty() {
+        out.group_median_ratio = tight[tight.len() / 2];
+        out.group_p10_ratio = tight[tight.len() / 10];
     }
     ratios.sort_by(|a, b| a.0.total_cmp(&b.0));
     if let Some((worst, at)) = ratios.last() {

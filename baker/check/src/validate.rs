@@ -288,7 +288,8 @@ fn mark_problems(file: &MresFile, edges: &Edges) -> Vec<String> {
     let level0: Vec<u32> = (0..n as u32).filter(|&c| file.clusters[c as usize].own_group == NO_GROUP).collect();
     let mut problems = Vec::new();
     let (uses, marks) = tally(edges, &level0);
-    let mut wrong: Vec<u32> = uses.iter().filter(|(e, u)| marks.get(*e).copied().unwrap_or(0) != *u % 2).map(|e| *e.0).collect();
+    let mut wrong: Vec<u32> =
+        uses.iter().filter(|(e, u)| marks.get(*e).copied().unwrap_or(0) != *u % 2).map(|e| *e.0).collect();
     wrong.sort_unstable();
     if let Some(&e) = wrong.first() {
         let (a, b) = edges.ends[e as usize];
@@ -346,7 +347,10 @@ fn group_border_problem(edges: &Edges, g: usize, members: &[u32], outputs: &[u32
     let (out_uses, out_marks) = tally(edges, outputs);
     let (before, after) = (unmarked_odd(&in_uses, &in_marks), unmarked_odd(&out_uses, &out_marks));
     if before != after {
-        let e = before.iter().chain(&after).find(|e| before.binary_search(e).is_err() || after.binary_search(e).is_err())?;
+        let e = before
+            .iter()
+            .chain(&after)
+            .find(|e| before.binary_search(e).is_err() || after.binary_search(e).is_err())?;
         let (a, b) = edges.ends[*e as usize];
         return Some(format!(
             "group {g}: its outputs change its border at edge {a:?}-{b:?} (unmarked odd in members: {}, in outputs: {}) (open-border marks)",

@@ -4,7 +4,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use mres_build::BakeSettings;
-use mres_check::validate::{validate, ValidateOptions};
+use mres_check::validate::{validate, Thresholds, ValidateOptions};
 use mres_cli::bench::{run_clusterlod, run_mres, BuilderRun, CUT_THRESHOLDS};
 use mres_cli::inspect::summarize;
 use mres_format::{select, MresFile};
@@ -73,6 +73,13 @@ struct ValidateArgs {
     /// Seed of the random cameras.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Uniform cuts the honesty check measures (thresholds at quantiles of the stored errors).
+    #[arg(long, default_value_t = 6, value_name = "N")]
+    honesty_cuts: usize,
+    /// Points the honesty check samples per cut and direction (more: slower, a finer look at
+    /// how tight each group's error is).
+    #[arg(long, default_value_t = 20_000, value_name = "N")]
+    honesty_samples: usize,
     /// Print the report as JSON on stdout instead of text.
     #[arg(long)]
     json: bool,
@@ -302,6 +309,11 @@ fn validate_cmd(a: ValidateArgs) -> Result<ExitCode> {
         random_cuts: a.random_cuts,
         uniform_cuts: a.uniform_cuts,
         seed: a.seed,
+        thresholds: Thresholds {
+            honesty_cuts: a.honesty_cuts,
+            honesty_samples: a.honesty_samples,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let report = validate(&f, &options).with_context(|| format!("{}", a.file.display()))?;
@@ -363,6 +375,10 @@ fn print_validate(file: &Path, report: &mres_check::validate::Report, level0: u6
     println!(
         "error honesty: worst {:.2} p99 {:.2} (measured distance / stored error, {} cuts, {} points); worst at {}",
         h.worst_ratio, h.p99_ratio, h.cuts, h.samples, h.worst
+    );
+    println!(
+        "error tightness: per group largest measured/stored, median {:.2} p10 {:.2} over {} groups",
+        h.group_median_ratio, h.group_p10_ratio, h.groups_measured
     );
     for v in &report.violations {
         println!("VIOLATION {}: {v}", file.display());
