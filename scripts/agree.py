@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """The two checkers must agree: compares `mres validate --json` with `check_mres.py --json`
 on one file (levels; clusters, groups and triangles per level; root groups and clusters;
-level-0 fill; both crack-free) and prints one line. Exit 1 on any disagreement.
+level-0 fill; both find no cracked cut and no violation, the open-edge marks of level 0 and of
+every group included: docs/FORMAT.md §6) and prints one line. Exit 1 on any disagreement.
 
     scripts/agree.py RUST.json PYTHON.json NAME
 """

@@ -1,12 +1,14 @@
 #!/usr/bin/env python3
-"""Independent checker for `.mres` files (format version 1).
+"""Independent checker for `.mres` files (format version 2).
 
 Written from docs/FORMAT.md alone, as a second implementation next to the Rust
 reader/validator: it reads every section with numpy, verifies checksums,
-references and ranges (spec section 7), decodes every cluster (section 5),
-checks the DAG invariants the selection rule relies on (section 6), checks that
-uniform and view-dependent cuts are crack-free by counting welded edges, cross-
-checks cut topology with trimesh and measures cut-to-level-0 distances.
+references and ranges (spec section 7), decodes every cluster (section 5, with
+its open-edge marks), checks the DAG invariants the selection rule relies on
+(section 6), checks the marks of level 0 and of every group, checks that uniform
+and view-dependent cuts are crack-free by counting welded edges (unmarked uses
+even, marked uses at most one), cross-checks cut topology with trimesh (a cut's
+boundary edges are its marked edges) and measures cut-to-level-0 distances.
 
 Usage:
     check_mres.py FILE.mres [FILE.mres ...] [--source MESH] [--random-cuts N]
@@ -39,7 +41,7 @@ except ImportError as exc:  # pragma: no cover - environment problem
 # ---------------------------------------------------------------------------
 
 MAGIC = b"MRES"
-VERSION = 1
+VERSION = 2
 HEADER_SIZE = 160
 GROUP_SIZE = 40
 CLUSTER_SIZE = 16
@@ -52,6 +54,7 @@ FLAG_NORMALS = 1
 FLAG_UVS = 2
 FLAG_MATERIALS = 4
 KNOWN_FLAGS = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS
+EDGE_OPEN = 1  # cluster header edge_flags bit 0: the cluster has an open-edge block
 
 # header bytes 0..112 (the checksum follows at 112, reserved at 144..160)
 HEADER_FMT = "<4sIII3ff2f2fIIIIIIQQQQQ"
@@ -74,7 +77,7 @@ PAGE_DT = np.dtype([
 ])
 CHDR_DT = np.dtype([
     ("vertex_count", "<u2"), ("triangle_count", "<u2"),
-    ("position_min", "<i4", (3,)), ("position_bits", "u1", (3,)), ("reserved0", "u1"),
+    ("position_min", "<i4", (3,)), ("position_bits", "u1", (3,)), ("edge_flags", "u1"),
     ("positions_offset", "<u4"), ("normals_offset", "<u4"), ("uvs_offset", "<u4"),
     ("indices_offset", "<u4"), ("materials_offset", "<u4"),
     ("normal_min", "<u2", (2,)), ("normal_bits", "u1", (2,)), ("reserved1", "<u2"),
@@ -264,6 +267,9 @@ class Checker:
          h_off, h_size, pt_off, pt_size) = struct.unpack_from(HEADER_FMT, d, 0)
         if magic != MAGIC:
             r.fatal("bad_magic", f"magic is {magic!r}, expected {MAGIC!r}")
+        if version == 1:
+            r.fatal("bad_version", f"version 1, this checker reads version {VERSION} only (version 1 has no "
+                                   "open-edge marks; re-bake the mesh with the current baker)")
         if version != VERSION:
             r.fatal("bad_version", f"version {version}, this checker reads version {VERSION}")
         if header_size != HEADER_SIZE:
@@ -700,6 +706,7 @@ class Checker:
         h = self.hdr
         if self.cpage is None:
             self.hdr_ok = np.zeros(C, dtype=bool)
+            self.has_marks = np.zeros(C, dtype=bool)
             return
         have = self.have_hdr
         page = self.cpage
@@ -714,14 +721,19 @@ class Checker:
         pb = h["position_bits"].astype(np.int64)
         pb_bad = have & (pb > 32).any(axis=1)
         r.violations_where("cluster_position_bits", pb_bad, lambda c: f"{self.cl(c)}: position_bits {pb[c].tolist()} > 32")
-        res_bad = have & ((h["reserved0"] != 0) | (h["reserved1"] != 0))
-        r.violations_where("reserved_nonzero", res_bad, lambda c: f"{self.cl(c)}: cluster header reserved fields not zero")
+        res_bad = have & (h["reserved1"] != 0)
+        r.violations_where("reserved_nonzero", res_bad, lambda c: f"{self.cl(c)}: cluster header reserved field not zero")
+        ef = h["edge_flags"].astype(np.int64)
+        ef_bad = have & ((ef & ~EDGE_OPEN) != 0)
+        r.violations_where("cluster_edge_flags", ef_bad,
+                           lambda c: f"{self.cl(c)}: edge_flags 0x{ef[c]:02x} has bits other than bit 0 (OPEN_EDGES)")
+        self.has_marks = have & ((ef & EDGE_OPEN) != 0)
         nb = h["normal_bits"].astype(np.int64)
         has_n = bool(self.flags & FLAG_NORMALS)
         nb_bad = have & has_n & (nb > self.normal_bits).any(axis=1)
         r.violations_where("cluster_normal_bits", nb_bad,
                            lambda c: f"{self.cl(c)}: normal_bits {nb[c].tolist()} > header normal_bits {self.normal_bits}")
-        bad = cnt_bad | pb_bad | nb_bad
+        bad = cnt_bad | pb_bad | nb_bad | ef_bad
         lengths = {
             "positions_offset": (True, (vc * pb.sum(axis=1) + 31) // 32 * 4),
             "normals_offset": (has_n, (vc * nb.sum(axis=1) + 31) // 32 * 4),
@@ -749,23 +761,55 @@ class Checker:
             bad |= miss | align | bounds
             if present:
                 blocks.append((off, length))
-        # overlapping blocks (informative; the spec does not forbid sharing)
+        # the open-edge block (section 5.7): no offset field, right after the
+        # indices block's padding, 3 bits per triangle in whole words
+        self.marks_offset = h["indices_offset"].astype(np.int64) + (3 * tc + 3) // 4 * 4
+        self.marks_length = (3 * tc + 31) // 32 * 4
+        mo, ml = self.marks_offset, self.marks_length
+        marks_out = self.has_marks & ~bad & (mo + ml > rsize)
+        r.violations_where("open_edge_block_bounds", marks_out,
+                           lambda c: f"{self.cl(c)}: open-edge block {mo[c]}..{mo[c] + ml[c]} runs past the page's "
+                                     f"{rsize[c]} bytes")
+        bad |= marks_out
         ok = have & ~bad
-        if blocks and ok.any():
-            cs = np.flatnonzero(ok)
-            starts = np.concatenate([b[0][cs] for b in blocks])
-            ends = np.concatenate([b[0][cs] + b[1][cs] for b in blocks])
-            pg = np.tile(page[cs], len(blocks))
-            owner = np.tile(cs, len(blocks))
-            nonempty = ends > starts
-            starts, ends, pg, owner = starts[nonempty], ends[nonempty], pg[nonempty], owner[nonempty]
-            order = np.lexsort((starts, pg))
-            s, e, q, o = starts[order], ends[order], pg[order], owner[order]
-            big = np.int64(1 << 26)  # > any offset in a page: keeps the running maximum per page
-            ov = np.flatnonzero((q[1:] == q[:-1]) & (s[1:] + q[1:] * big < np.maximum.accumulate(e + q * big)[:-1]))
-            r.notes_where("block_overlap", ov, lambda i: f"page {q[i + 1]}: block of cluster {o[i + 1]} at {s[i + 1]} "
-                                                       "overlaps an earlier block")
+        bad |= self.check_block_overlap(ok & self.has_marks, ok, blocks, page)
         self.hdr_ok = have & ~bad & self.cluster_ok
+
+    def check_block_overlap(self, marked, ok, blocks, page):
+        """Open-edge blocks must not overlap any block of their page (a violation,
+        section 5.7); other blocks overlapping each other is informative. Returns
+        the clusters whose open-edge block overlaps another block."""
+        r, C = self.r, self.C
+        bad = np.zeros(C, dtype=bool)
+        cs = np.flatnonzero(ok)
+        mk = np.flatnonzero(marked)
+        if not cs.size:
+            return bad
+        starts = np.concatenate([b[0][cs] for b in blocks] + [self.marks_offset[mk]])
+        ends = np.concatenate([b[0][cs] + b[1][cs] for b in blocks] + [self.marks_offset[mk] + self.marks_length[mk]])
+        pg = np.concatenate([np.tile(page[cs], len(blocks)), page[mk]])
+        owner = np.concatenate([np.tile(cs, len(blocks)), mk])
+        is_marks = np.concatenate([np.zeros(cs.size * len(blocks), dtype=bool), np.ones(mk.size, dtype=bool)])
+        nonempty = ends > starts
+        starts, ends, pg, owner, is_marks = (a[nonempty] for a in (starts, ends, pg, owner, is_marks))
+        order = np.lexsort((starts, pg))
+        s, e, q, o, m = starts[order], ends[order], pg[order], owner[order], is_marks[order]
+        big = np.int64(1 << 26)  # > any offset in a page: keeps the running maximum per page
+        # block i overlaps an earlier one iff it starts before the largest end so far
+        # in its page, and a later one iff the next block of its page starts before it ends
+        prev_end = np.maximum.accumulate(e + q * big)
+        hits_prev = np.zeros(s.size, dtype=bool)
+        hits_prev[1:] = (q[1:] == q[:-1]) & (s[1:] + q[1:] * big < prev_end[:-1])
+        hits_next = np.zeros(s.size, dtype=bool)
+        hits_next[:-1] = (q[1:] == q[:-1]) & (s[1:] < e[:-1])
+        r.notes_where("block_overlap", hits_prev & ~m,
+                      lambda i: f"page {q[i]}: block of cluster {o[i]} at {s[i]} overlaps an earlier block")
+        ov = (hits_prev | hits_next) & m
+        r.violations_where("open_edge_block_overlap", ov,
+                           lambda i: f"page {q[i]}: open-edge block of cluster {o[i]} at {s[i]}..{e[i]} overlaps "
+                                     "another block of the page")
+        bad[o[ov]] = True
+        return bad
 
     def decode_clusters(self):
         """Decode positions, normals, UVs, indices and materials of every
@@ -871,6 +915,7 @@ class Checker:
         degen = (tl[:, 0] == tl[:, 1]) | (tl[:, 1] == tl[:, 2]) | (tl[:, 0] == tl[:, 2])
         r.notes_where("degenerate_index_triangle", degen,
                       lambda i: f"{self.cl(self.tcl[i])}: triangle {i - self.tbase[self.tcl[i]]} repeats a vertex index")
+        self.decode_marks(cbase, tc)
         # materials
         if self.flags & FLAG_MATERIALS and tc.sum():
             tloc = seg_arange(tc)
@@ -885,6 +930,33 @@ class Checker:
                           lambda v: f"{self.cl(vcl[v])}: vertex {vloc[v]} is not used by any triangle")
         self.complete = bool(ok.all() and self.indices_ok and not over.any() and C > 0)
         self._lap("decode", t)
+
+    def decode_marks(self, cbase, tc):
+        """Open-edge marks (section 5.7): self.marks[t, k] is True iff the edge of
+        triangle t from corner k to corner (k+1) mod 3 is marked."""
+        C = self.C
+        self.marks = np.zeros((int(tc.sum()), 3), dtype=bool)
+        flagged = self.has_marks & (tc > 0)
+        if not flagged.any():
+            return
+        w0 = (cbase + self.marks_offset) // 4
+        tri = np.flatnonzero(flagged[self.tcl])              # triangles of flagged clusters
+        c = self.tcl[tri]
+        tloc = tri - self.tbase[c]
+        value = read_bits(self.words, w0[c], 3 * tloc, np.full(tri.size, 3, dtype=np.int64))
+        self.marks[tri] = (value[:, None] >> np.arange(3)) & 1 == 1
+        # unused high bits of the last word are zero
+        fc = np.flatnonzero(flagged)
+        used = 3 * tc[fc]
+        rest = (32 - used % 32) % 32
+        tail = read_bits(self.words, w0[fc], used, rest)
+        self.r.violations_where("open_edge_unused_bits", fc[tail != 0],
+                                lambda i: f"{self.cl(i)}: open-edge block has nonzero unused bits after its "
+                                          f"{3 * tc[i]} mark bits")
+        self.r.notes_where("open_edge_block_empty", fc[~np.bincount(c, weights=value, minlength=C)[fc].astype(bool)],
+                           lambda i: f"{self.cl(i)}: edge_flags announces an open-edge block but no edge is marked")
+        self.r.figures["marked_uses"] = int(self.marks.sum())
+        self.r.figures["clusters_with_marks"] = int(fc.size)
 
     # -- welding and edges ----------------------------------------------------
     def build_topology(self):
@@ -923,41 +995,120 @@ class Checker:
         self.ekeys = ukeys
         level0 = self.clevel == 0
         self.tri_l0 = level0[self.tcl]
-        self.L0 = np.bincount(self.eid[self.tri_l0].reshape(-1), minlength=self.E)
+        # a use of an edge is numbered by the edge, plus E where the triangle marks
+        # it: one bincount of 2E bins gives the unmarked (first E) and marked uses
+        self.euse = self.eid + self.E * self.marks
+        self.U0, self.M0 = self.use_counts(self.tri_l0)
+        self.L0 = self.U0 + self.M0
         self.special = (self.L0 > 0) & (self.L0 != 2)
         f = self.r.figures
         f["welded_vertices"] = self.NW
         f["level0_boundary_edges"] = int((self.L0 == 1).sum())
         f["level0_nonmanifold_edges"] = int((self.L0 > 2).sum())
+        f["level0_marked_edges"] = int((self.M0 > 0).sum())
         self._lap("topology", t)
+
+    def use_counts(self, tri_mask):
+        """(U, M): unmarked and marked uses of every edge by the triangles in tri_mask."""
+        cnt = np.bincount(self.euse[tri_mask].reshape(-1), minlength=2 * self.E)
+        return cnt[:self.E], cnt[self.E:]
 
     def edge_desc(self, e):
         k = int(self.ekeys[e])
-        a, b = divmod(k, self.NW)
+        a, b = divmod(int(k), self.NW)
         return f"edge {self.wq[a].tolist()}-{self.wq[b].tolist()}"
 
-    # Section 6 (edge rule): an open or non-manifold level-0 edge (used once, or
-    # three or more times, at level 0) is used exactly as often in every cut;
-    # every other edge an even number of times -- twice, or four times where
-    # simplification pinched a thin part into one edge. Odd = hole/T-junction.
-    def bad_edges(self, cnt):
-        return np.where(self.special, cnt != self.L0, (cnt & 1) == 1)
+    def edge_users(self, e, tri_mask):
+        """The clusters among tri_mask's triangles that use edge e, with their
+        unmarked and marked uses (for messages)."""
+        t, k = np.nonzero((self.eid == e) & tri_mask[:, None])
+        cs = self.tcl[t]
+        out = []
+        for c in np.unique(cs)[:4].tolist():
+            mk = self.marks[t[cs == c], k[cs == c]]
+            out.append(f"{self.cl(c)} ({int((~mk).sum())} unmarked, {int(mk.sum())} marked)")
+        more = np.unique(cs).size - len(out)
+        return "; ".join(out) + (f"; {more} more" if more > 0 else "") if out else "none"
 
-    def pinched_edges(self, cnt):
-        return ~self.special & (cnt >= 4)
+    # -- section 6, crack-free cuts: marks of level 0 and of each group -------------
+    def check_marks(self):
+        """Rule (a): at level 0 an edge carries exactly one mark iff it is used an
+        odd number of times. Rule (b): each finite-error group keeps its border
+        (the edges its members use an odd number of times unmarked are those its
+        outputs do) and its outputs mark an edge at most once."""
+        t0 = time.perf_counter()
+        r = self.r
+        bad = self.M0 != (self.L0 & 1)
+        r.violations_where("level0_marks", bad,
+                           lambda e: f"rule (a): {self.edge_desc(e)} is used {self.L0[e]} times at level 0, "
+                                     f"{self.M0[e]} of them marked (must be {self.L0[e] & 1}); level-0 clusters using it: "
+                                     f"{self.edge_users(e, self.tri_l0)}")
+        self.check_group_marks()
+        self._lap("marks", t0)
 
-    def describe_cut_failure(self, name, sel, cnt, bad):
-        bad_idx = np.flatnonzero(bad)
-        e = int(bad_idx[0])
-        has_e = (self.eid == e).any(axis=1)
-        in_cut = sorted(set(self.tcl[has_e & self.cluster_tris_mask(sel)].tolist()))
-        in_l0 = sorted(set(self.tcl[has_e & self.tri_l0].tolist()))
-        where = ", ".join(self.cl(c) for c in in_cut[:4]) or "none"
-        where0 = ", ".join(self.cl(c) for c in in_l0[:4]) or "none"
-        need = str(self.L0[e]) if self.special[e] else "an even number"
-        return (f"{name}: {bad_idx.size} edges with wrong use count, e.g. {self.edge_desc(e)} used {cnt[e]} times "
-                f"(level 0: {self.L0[e]}; must be {need}); "
-                f"cut clusters using it: {where}; level-0 clusters using it: {where0}")
+    def group_edge_uses(self, group_of_cluster, marked):
+        """Sorted keys g*E + e and their counts, over the edge uses with the given
+        mark state by clusters whose group_of_cluster is a finite-error group g."""
+        uc = np.repeat(self.tcl, 3)
+        g = group_of_cluster[uc]
+        valid = (g >= 0) & (g < self.G)
+        valid[valid] = np.isfinite(self.gerror[g[valid]])
+        sel = valid & (self.marks.reshape(-1) == marked)
+        return np.unique(g[sel] * self.E + self.eid.reshape(-1)[sel], return_counts=True)
+
+    def check_group_marks(self):
+        r, E = self.r, self.E
+        own = np.where(self.has_own, self.cown, -1)
+        kin, nin = self.group_edge_uses(self.cgroup, False)
+        kout, nout = self.group_edge_uses(own, False)
+        odd_in = kin[(nin & 1) == 1]
+        odd_out = kout[(nout & 1) == 1]
+        lost = np.setdiff1d(odd_in, odd_out, assume_unique=True)   # border edge the outputs do not keep
+        new = np.setdiff1d(odd_out, odd_in, assume_unique=True)    # odd unmarked edge the members do not have
+        for kind, keys, what in (("group_border_lost", lost, "its members use it an odd number of times unmarked, "
+                                                              "its outputs an even number"),
+                                 ("group_border_new", new, "its outputs use it an odd number of times unmarked, "
+                                                           "its members an even number")):
+            r.violations_where(kind, np.arange(keys.size),
+                               lambda i, keys=keys, what=what: self.group_edge_msg(int(keys[i]), what))
+        kmk, nmk = self.group_edge_uses(own, True)
+        twice = kmk[nmk > 1]
+        r.violations_where("group_marked_twice", np.arange(twice.size),
+                           lambda i: self.group_edge_msg(int(twice[i]), "its outputs mark it more than once"))
+        f = r.figures
+        f["group_border_edges"] = int(odd_in.size)
+
+    def group_edge_msg(self, key, what):
+        g, e = divmod(key, self.E)
+        members = np.repeat(self.cgroup == g, np.where(self.hdr_ok, self.ctc, 0))
+        outputs = np.repeat(self.has_own & (self.cown == g), np.where(self.hdr_ok, self.ctc, 0))
+        return (f"rule (b): {self.gl(g)}, {self.edge_desc(e)}: {what}; members using it: "
+                f"{self.edge_users(e, members)}; outputs using it: {self.edge_users(e, outputs)}")
+
+    # Section 6, rule (c): in every cut an edge's unmarked uses are even (twice,
+    # or four times where simplification pinched a thin part into one edge), and
+    # at most one use is marked. Odd unmarked = hole or T-junction.
+    @staticmethod
+    def bad_edges(U, M):
+        return ((U & 1) == 1) | (M > 1)
+
+    def pinched_edges(self, U):
+        return ~self.special & (U >= 4)
+
+    def describe_cut_failure(self, name, sel, U, M, bad):
+        odd = np.flatnonzero(bad & ((U & 1) == 1))
+        twice = np.flatnonzero(bad & (M > 1))
+        tm = self.cluster_tris_mask(sel)
+        examples = []
+        for edges, why in ((odd, "unmarked uses must be even: a hole or T-junction"),
+                           (twice, "at most one use may be marked")):
+            if edges.size:
+                e = int(edges[0])
+                examples.append(f"{self.edge_desc(e)} used {U[e]} times unmarked and {M[e]} marked ({why}; level 0: "
+                                f"{self.U0[e]} unmarked, {self.M0[e]} marked); cut clusters using it: "
+                                f"{self.edge_users(e, tm)}; level-0 clusters using it: {self.edge_users(e, self.tri_l0)}")
+        return (f"{name}: rule (c) broken: {odd.size} edges used an odd number of times unmarked, {twice.size} marked "
+                f"more than once; e.g. " + "; and ".join(examples))
 
     def cluster_tris_mask(self, sel):
         return np.repeat(sel, np.where(self.hdr_ok, self.ctc, 0))
@@ -977,29 +1128,31 @@ class Checker:
             return False
         return True
 
-    def note_pinched(self, name, cnt, stats):
-        p = self.pinched_edges(cnt)
+    def note_pinched(self, name, U, stats):
+        p = self.pinched_edges(U)
         n = int(p.sum())
         if n:
             stats["cuts_with_pinched_edges"] += 1
             stats["max_pinched_edges"] = max(stats["max_pinched_edges"], n)
-            many = np.flatnonzero(p & (cnt > 4))
+            many = np.flatnonzero(p & (U > 4))
             if many.size:
                 e = int(many[0])
-                self.r.warn("edge_used_6_plus", f"{name}: {many.size} edges used 6 or more times (the spec names "
-                                                f"2 or 4), e.g. {self.edge_desc(e)} used {cnt[e]} times")
+                self.r.warn("edge_used_6_plus", f"{name}: {many.size} edges used 6 or more times unmarked (the spec "
+                                                f"names 2 or 4), e.g. {self.edge_desc(e)} used {U[e]} times")
         return n
 
     def check_cut(self, name, sel, stats=None):
-        tm = self.cluster_tris_mask(sel)
-        cnt = np.bincount(self.eid[tm].reshape(-1), minlength=self.E)
-        bad = self.bad_edges(cnt)
+        U, M = self.use_counts(self.cluster_tris_mask(sel))
+        bad = self.bad_edges(U, M)
         ok = self.check_overlap(name, sel)
         if bad.any():
-            self.r.violation("cracked_cut", self.describe_cut_failure(name, sel, cnt, bad))
+            if len(self.r.violations.get("cracked_cut", {"examples": []})["examples"]) < MAX_EXAMPLES:
+                self.r.violation("cracked_cut", self.describe_cut_failure(name, sel, U, M, bad))
+            else:  # describing costs a scan of every triangle: only the printed examples
+                self.r.violations["cracked_cut"]["count"] += 1
             ok = False
         if stats is not None:
-            self.note_pinched(name, cnt, stats)
+            self.note_pinched(name, U, stats)
         return ok
 
     def uniform_thresholds(self):
@@ -1011,26 +1164,28 @@ class Checker:
 
     def check_uniform_cuts(self):
         """Every uniform cut (spec section 6), incrementally: a cluster is drawn
-        for thresholds T[i] with enter <= i < leave."""
+        for thresholds T[i] with enter <= i < leave. cnt holds the cut's uses in
+        the 2E numbering of self.euse (unmarked, then marked)."""
         t0 = time.perf_counter()
         T = self.uniform_thresholds()
         self.T = T
+        E = self.E
         own = self.own_err.astype(np.float64)
         par = self.par_err.astype(np.float64)
         enter = np.searchsorted(T, own, side="left")
         leave = np.searchsorted(T, par, side="left")
         live = enter < leave
         tc = np.where(self.hdr_ok, self.ctc, 0)
-        cnt = np.zeros(self.E, dtype=np.int64)
-        bad = self.bad_edges(cnt)
-        nbad = int(bad.sum())
+        cnt = np.zeros(2 * E, dtype=np.int64)
+        bad = np.zeros(E, dtype=bool)
+        nbad = 0
         order_in = np.argsort(enter, kind="stable")
         order_out = np.argsort(leave, kind="stable")
         ein = enter[order_in]
         eout = leave[order_out]
         failures = 0
         stats = {"cuts_with_pinched_edges": 0, "max_pinched_edges": 0}
-        pin = np.zeros(self.E, dtype=bool)
+        pin = np.zeros(E, dtype=bool)
         npin = 0
         for i in range(T.size):
             add = order_in[np.searchsorted(ein, i, "left"):np.searchsorted(ein, i, "right")]
@@ -1039,16 +1194,16 @@ class Checker:
             rem = rem[live[rem]]
             if add.size == 0 and rem.size == 0 and i > 0:
                 continue
-            ea = self.eid[np.repeat(self.tbase[add], tc[add]) + seg_arange(tc[add])].reshape(-1)
-            er = self.eid[np.repeat(self.tbase[rem], tc[rem]) + seg_arange(tc[rem])].reshape(-1)
-            touched = np.unique(np.concatenate([ea, er]))
+            ea = self.euse[np.repeat(self.tbase[add], tc[add]) + seg_arange(tc[add])].reshape(-1)
+            er = self.euse[np.repeat(self.tbase[rem], tc[rem]) + seg_arange(tc[rem])].reshape(-1)
+            touched = np.unique(np.concatenate([ea, er]) % E)
             before = int(bad[touched].sum())
             ua, ca = np.unique(ea, return_counts=True)
             cnt[ua] += ca
             ur, cr = np.unique(er, return_counts=True)
             cnt[ur] -= cr
-            ct = cnt[touched]
-            nb = np.where(self.special[touched], ct != self.L0[touched], (ct & 1) == 1)
+            ut = cnt[touched]
+            nb = self.bad_edges(ut, cnt[touched + E])
             bad[touched] = nb
             nbad += int(nb.sum()) - before
             name = f"uniform cut t={fmt_f(T[i])}"
@@ -1056,23 +1211,22 @@ class Checker:
             ok = self.check_overlap(name, sel)
             if nbad:
                 if failures < MAX_EXAMPLES:
-                    self.r.violation("cracked_cut", self.describe_cut_failure(name, sel, cnt, bad))
+                    self.r.violation("cracked_cut", self.describe_cut_failure(name, sel, cnt[:E], cnt[E:], bad))
                 else:
                     self.r.violations["cracked_cut"]["count"] += 1
             if nbad or not ok:
                 failures += 1
             bp = int(pin[touched].sum())
-            np_t = ~self.special[touched] & (ct >= 4)
+            np_t = ~self.special[touched] & (ut >= 4)
             pin[touched] = np_t
             npin += int(np_t.sum()) - bp
             if npin:
                 stats["cuts_with_pinched_edges"] += 1
                 stats["max_pinched_edges"] = max(stats["max_pinched_edges"], npin)
-                if (np_t & (ct > 4)).any():
-                    self.note_pinched(name, cnt, {"cuts_with_pinched_edges": 0, "max_pinched_edges": 0})
+                if (np_t & (ut > 4)).any():
+                    self.note_pinched(name, cnt[:E], {"cuts_with_pinched_edges": 0, "max_pinched_edges": 0})
         # sanity: the incremental counts equal a direct count at the last threshold
-        sel = self.uniform_sel(T[-1])
-        direct = np.bincount(self.eid[self.cluster_tris_mask(sel)].reshape(-1), minlength=self.E)
+        direct = np.concatenate(self.use_counts(self.cluster_tris_mask(self.uniform_sel(T[-1]))))
         if not np.array_equal(direct, cnt):
             self.r.violation("checker_self_check", "incremental uniform-cut edge counts disagree with a direct count")
         if (cnt < 0).any():
@@ -1186,13 +1340,32 @@ class Checker:
         return mesh, used
 
     def boundary_keys_trimesh(self, mesh, used):
+        """Keys of the edges trimesh finds used an odd number of times (the
+        boundary: open edges, and non-manifold edges with an odd count)."""
         import trimesh
         es = mesh.edges_sorted
-        rows = trimesh.grouping.group_rows(es, require_count=1)
-        g = used[es[rows]]
+        first, inverse = trimesh.grouping.unique_rows(es)
+        odd = (np.bincount(inverse.reshape(-1), minlength=len(first)) & 1) == 1
+        g = used[es[first[odd]]]
         lo = np.minimum(g[:, 0], g[:, 1])
         hi = np.maximum(g[:, 0], g[:, 1])
         return np.unique(lo * self.NW + hi)
+
+    def compare_boundary(self, name, bk, U, M):
+        """trimesh's boundary of a cut must be its marked edges (rule (c) makes
+        every odd edge a marked one), and the checker's own odd edges."""
+        marked = self.ekeys[M > 0]
+        if not np.array_equal(bk, marked):
+            unmarked = np.setdiff1d(bk, marked)
+            inner = np.setdiff1d(marked, bk)
+            ex = unmarked[0] if unmarked.size else inner[0]
+            a, b = divmod(int(ex), self.NW)
+            self.r.violation("trimesh_boundary",
+                             f"{name}: boundary edges differ from the marked edges ({unmarked.size} boundary edges "
+                             f"unmarked, {inner.size} marked edges not on the boundary), e.g. edge "
+                             f"{self.wq[a].tolist()}-{self.wq[b].tolist()}")
+        if not np.array_equal(bk, self.ekeys[((U + M) & 1) == 1]):
+            self.r.violation("checker_self_check", f"{name}: trimesh and edge counting disagree on boundary edges")
 
     def topology_of(self, mesh):
         import trimesh  # noqa: F401
@@ -1237,11 +1410,7 @@ class Checker:
         mesh0, used0 = self.cut_mesh(level0 & self.hdr_ok)
         self.mesh0 = mesh0
         src = self.topology_of(mesh0)
-        src_boundary = self.boundary_keys_trimesh(mesh0, used0)
-        own_boundary = self.ekeys[self.L0 == 1]
-        if not np.array_equal(src_boundary, own_boundary):
-            r.violation("checker_self_check", f"level 0: trimesh finds {src_boundary.size} boundary edges, "
-                                              f"edge counting finds {own_boundary.size}")
+        self.compare_boundary("level 0", self.boundary_keys_trimesh(mesh0, used0), self.U0, self.M0)
         src0 = self.pinch_stats(mesh0)
         src.update(src0)
         r.figures["level0_topology"] = src
@@ -1265,26 +1434,16 @@ class Checker:
                 continue
             mesh, used = self.cut_mesh(sel)
             top = self.topology_of(mesh)
-            bk = self.boundary_keys_trimesh(mesh, used)
-            if not np.array_equal(bk, src_boundary):
-                missing = np.setdiff1d(src_boundary, bk)
-                extra = np.setdiff1d(bk, src_boundary)
-                ex = missing[0] if missing.size else extra[0]
-                a, b = divmod(int(ex), self.NW)
-                r.violation("trimesh_boundary",
-                            f"{name}: boundary edges differ from level 0 ({missing.size} missing, {extra.size} extra), "
-                            f"e.g. edge {self.wq[a].tolist()}-{self.wq[b].tolist()}")
-            # cross-check: trimesh boundary == own count of this cut's edges used once
-            cnt = np.bincount(self.eid[self.cluster_tris_mask(sel)].reshape(-1), minlength=self.E)
-            if not np.array_equal(bk, self.ekeys[cnt == 1]):
-                r.violation("checker_self_check", f"{name}: trimesh and edge counting disagree on boundary edges")
-            # pinched edges (used 4 times, allowed by section 6) make trimesh call
-            # the cut not watertight; the expectation accounts for them
-            npinch = int(self.pinched_edges(cnt).sum())
-            expect_wt = src["watertight"] and npinch == 0
+            U, M = self.use_counts(self.cluster_tris_mask(sel))
+            self.compare_boundary(name, self.boundary_keys_trimesh(mesh, used), U, M)
+            # watertight = every used edge used exactly twice: marked (open) edges and
+            # pinched edges (used 4 times, allowed by section 6) make it false
+            total = U + M
+            expect_wt = bool(((total == 0) | (total == 2)).all())
             if top["watertight"] != expect_wt:
                 r.violation("trimesh_watertight", f"{name}: is_watertight {top['watertight']}, expected {expect_wt} "
-                                                  f"(level 0 {src['watertight']}, {npinch} pinched edges)")
+                                                  f"({int((M > 0).sum())} marked edges, "
+                                                  f"{int(self.pinched_edges(U).sum())} pinched edges)")
             if top["bodies"] == src["bodies"]:
                 if top["euler"] != src["euler"]:
                     msg = (f"{name}: Euler characteristic {top['euler']} != level 0 {src['euler']} with the same "
@@ -1393,6 +1552,7 @@ class Checker:
             self.r.note("cuts_skipped", "cut, trimesh and distance checks skipped: not every cluster decoded cleanly")
             return
         self.build_topology()
+        self.check_marks()
         self.check_uniform_cuts()
         self.check_random_cuts()
         if not self.opts.no_trimesh:
@@ -1436,6 +1596,8 @@ def print_report(rep, out):
             head.append(f"{k}={f[k]}")
     if "level0_fill" in f:
         head.append(f"level0_fill={f['level0_fill']:.2f}")
+    if "level0_marked_edges" in f:
+        head.append(f"level0_marked_edges={f['level0_marked_edges']}")
     for k in ("uniform_cuts", "random_cuts", "trimesh_cuts"):
         if k in f:
             head.append(f"{k}={f[k]}")
