@@ -122,9 +122,6 @@ pub fn simplify_measured(
 /// corner k (bit k), the midpoint of edge k from corner k (bit 3 + k), the centroid (bit 6).
 pub type Owned = ([u32; 3], u8);
 
-/// Every sample of a triangle.
-pub const ALL_SAMPLES: u8 = 0x7f;
-
 /// The level-0 samples of a group's members, one entry per triangle (bits of one triangle
 /// owned by several members are joined), sorted.
 pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
@@ -150,8 +147,8 @@ fn sample_point(t: &Triangle<f32>, b: usize) -> [f32; 3] {
 }
 
 /// Hands each level-0 sample of `owned` to a cluster of `children` (a group's output, whose
-/// stored error is `error`) within `error` of it, the one nearest to the triangle's centroid
-/// when that is close enough: the next level measures the sample against that cluster's group.
+/// stored error is `error`) within `error` of it, the one near the triangle's centroid when
+/// that is close enough: the next level measures the sample against that cluster's group.
 /// A sample must go to a cluster near itself, not just near its triangle: where a group border
 /// later runs between two clusters, a level-0 triangle can straddle it, and its far corner
 /// would be measured across the border. Every sample stays under exactly one pending cluster.
@@ -168,7 +165,9 @@ pub fn assign_owned(mesh: &WeldedMesh, owned: &[Owned], children: &[Vec<u32>], e
     let mut bits = vec![0u8; children.len()];
     for &(t, mask) in owned {
         let tri = t.map(point);
-        let (_, near) = bvh.nearest_squared(&tris, sample_point(&tri, 6), 0.0, hint);
+        // Any cluster within a quarter of the error will do for the centroid (the nearest
+        // would be tighter by little, and an exact search costs a full descent).
+        let (_, near) = bvh.nearest_squared(&tris, sample_point(&tri, 6), close2 / 16.0, hint);
         hint = near;
         let mut touched: Vec<usize> = Vec::new();
         for b in (0..7).filter(|b| mask >> b & 1 != 0) {

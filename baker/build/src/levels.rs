@@ -7,9 +7,7 @@
 
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopCluster, LOCAL};
-use crate::deviation::{
-    assign_owned, merge_owned, part_sizes, simplify_measured, Original, Owned, Reference, ALL_SAMPLES,
-};
+use crate::deviation::{assign_owned, merge_owned, part_sizes, simplify_measured, Original, Owned, Reference};
 use crate::error::BakeError;
 use crate::open;
 use crate::partition::{cluster_graph, partition};
@@ -56,13 +54,43 @@ struct Child {
 pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64]) -> Vec<BuiltCluster> {
     let clusters = level0_clusters(mesh, settings);
     let marks = open::mark(mesh, &clusters, open);
+    let samples = first_samples(mesh, &clusters);
     clusters
         .into_par_iter()
         .zip(marks)
-        .map(|(indices, open)| {
+        .zip(samples)
+        .map(|((indices, open), samples)| {
             let own_sphere = bounding_sphere(&indices, &mesh.positions);
-            let owned = indices.chunks_exact(3).map(|t| ([t[0], t[1], t[2]], ALL_SAMPLES)).collect();
+            let owned = indices.chunks_exact(3).zip(samples).map(|(t, bits)| ([t[0], t[1], t[2]], bits)).collect();
             BuiltCluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP, open, owned }
+        })
+        .collect()
+}
+
+/// Per triangle of `clusters`, the level-0 samples it owns (see `deviation::Owned`): its
+/// centroid, and each corner and edge midpoint on the first triangle that uses that position or
+/// edge, so that a shared point is measured once per level.
+fn first_samples(mesh: &WeldedMesh, clusters: &[Vec<u32>]) -> Vec<Vec<u8>> {
+    let mut corner_seen = vec![false; mesh.position_count];
+    let mut edge_seen = rustc_hash::FxHashSet::default();
+    clusters
+        .iter()
+        .map(|indices| {
+            (0..indices.len() / 3)
+                .map(|t| {
+                    let mut bits = 1u8 << 6;
+                    for (k, e) in open::triangle_edges(mesh, indices, t).into_iter().enumerate() {
+                        let p = mesh.position_ids[indices[3 * t + k] as usize] as usize;
+                        if !std::mem::replace(&mut corner_seen[p], true) {
+                            bits |= 1 << k;
+                        }
+                        if edge_seen.insert(e) {
+                            bits |= 8 << k;
+                        }
+                    }
+                    bits
+                })
+                .collect()
         })
         .collect()
 }
