@@ -20,12 +20,14 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context as _, Result};
+use mres_format::page::DecodedCluster;
 use mres_format::select::{projected_error, view_cut};
 use mres_format::{MresFile, NO_GROUP};
 use serde_json::{json, Value};
 
 use crate::camera::{crack_eyes, selection_eyes, Camera};
+use crate::exposed::ExposureTest;
 use crate::gpu_types::{FLAG_FRUSTUM_CULL, FLAG_WRITE_PROJECTED};
 use crate::image::{count_flagged, count_model, write_png, FLAG_RGBA};
 use crate::scene::SceneData;
@@ -144,6 +146,11 @@ pub struct VerifyReport {
     /// Most flagged pixels in one render that lie beyond the depth tolerance of the
     /// full-detail surface: holes (flagged pixels within it are folds within the error).
     pub max_hole_pixels: u64,
+    /// Most flagged pixels in one render that lie beyond the depth tolerance but show the
+    /// full-detail surface itself from behind, unenclosed (open geometry; crate::exposed).
+    pub max_exposed_pixels: u64,
+    /// The render with the most hole pixels: (eye, tau, hole pixels, its first hole pixel).
+    pub worst_hole: Option<([f32; 3], f32, u64, [u32; 2])>,
     /// Renders with any flagged pixel.
     pub flagged_renders: usize,
     /// Fewest model pixels in one crack render (shows the model was in view).
@@ -204,8 +211,10 @@ impl VerifyReport {
                 "renders": self.crack_renders,
                 "max_flagged_pixels": self.max_flagged_pixels,
                 "max_hole_pixels": self.max_hole_pixels,
+                "max_exposed_pixels": self.max_exposed_pixels,
                 "flagged_renders": self.flagged_renders,
                 "min_model_pixels": self.min_model_pixels,
+                "worst_hole": self.worst_hole.map(|(eye, tau, n, pixel)| json!({"eye": eye, "tau": tau, "holes": n, "first_pixel": pixel})),
                 "worst": self.worst_crack.map(|(eye, tau, n)| json!({"eye": eye, "tau": tau, "flagged": n})),
             },
             "depth": {
@@ -245,6 +254,7 @@ pub fn verify(
     options: &VerifyOptions,
 ) -> Result<VerifyReport> {
     let mut report = VerifyReport { min_selected: usize::MAX, min_model_pixels: u64::MAX, ..Default::default() };
+    let mut decoded = None;
     let bounds = scene.bounds;
     let n = file.clusters.len() as u32;
 
@@ -346,6 +356,7 @@ pub fn verify(
             options.height,
         )?;
         let full_depth = full.depth.unwrap_or_default();
+        let mut exposure: Option<ExposureTest> = None;
         for &tau in &options.crack_taus {
             let flags = FLAG_FRUSTUM_CULL | options.crack_flags;
             let frame = renderer.render_with_depth(
@@ -367,11 +378,46 @@ pub fn verify(
             let flagged = count_flagged(&frame.rgba);
             // A back face within the depth tolerance of the full-detail surface is the cut
             // folding within its error (a tiny part flattened or turned over); one beyond it
-            // shows the far inside: a hole.
-            let holes =
-                frame.rgba.chunks_exact(4).zip(&depth.beyond).filter(|(p, &beyond)| *p == FLAG_RGBA && beyond).count()
-                    as u64;
-            report.max_hole_pixels = report.max_hole_pixels.max(holes);
+            // shows the far inside (a hole) unless the full-detail surface is itself seen
+            // from behind there (open geometry, crate::exposed).
+            let candidates: Vec<usize> = (0..depth.beyond.len())
+                .filter(|&i| depth.beyond[i] && frame.rgba[i * 4..i * 4 + 4] == FLAG_RGBA)
+                .collect();
+            let mut holes = 0u64;
+            let mut first_hole = None;
+            let mut cut_test: Option<ExposureTest> = None;
+            if !candidates.is_empty() {
+                if exposure.is_none() {
+                    let set = view_cut(&file.groups, &file.clusters, &camera.view_params(), 0.0);
+                    exposure = Some(ExposureTest::new(&camera, triangles(file, &mut decoded, &set)?));
+                }
+                let test = exposure.as_ref().context("exposure test")?;
+                let cut_depth = frame.depth.as_deref().unwrap_or_default();
+                let k = camera.height as f64 * 0.5 * camera.proj_y as f64;
+                let factor = options.depth_error_factor as f64;
+                let tolerance = |t: f64| factor * (tau as f64 * t / k + t * 1e-5);
+                for &i in &candidates {
+                    let (x, y) = (i % options.width as usize, i / options.width as usize);
+                    let mut depths = neighbour_depths(cut_depth, x, y, options.width as usize, camera.z_near);
+                    // At an edge-on triangle the rasterizer's depth can lie far off the
+                    // triangle (its vertices are snapped to the sub-pixel grid): add what the
+                    // pixel centre's ray sees of the cut.
+                    if cut_test.is_none() {
+                        let set = view_cut(&file.groups, &file.clusters, &camera.view_params(), tau);
+                        cut_test = Some(ExposureTest::new(&camera, triangles(file, &mut decoded, &set)?));
+                    }
+                    depths.extend(cut_test.as_ref().and_then(|t| t.first_back_depth(x, y)));
+                    if !test.exposed(x, y, &depths, tau.ceil() as usize + 1, tolerance) {
+                        holes += 1;
+                        first_hole.get_or_insert([x as u32, y as u32]);
+                    }
+                }
+                report.max_exposed_pixels = report.max_exposed_pixels.max(candidates.len() as u64 - holes);
+            }
+            if holes > report.max_hole_pixels {
+                report.max_hole_pixels = holes;
+                report.worst_hole = first_hole.map(|pixel| (eye, tau, holes, pixel));
+            }
             let model = count_model(&frame.rgba);
             report.crack_renders += 1;
             report.min_model_pixels = report.min_model_pixels.min(model);
@@ -397,6 +443,35 @@ pub fn verify(
         report.min_model_pixels = 0;
     }
     Ok(report)
+}
+
+/// The triangles of the clusters `set`, object space; decodes the file's clusters on first use.
+fn triangles(file: &MresFile, decoded: &mut Option<Vec<DecodedCluster>>, set: &[u32]) -> Result<Vec<[[f64; 3]; 3]>> {
+    if decoded.is_none() {
+        *decoded = Some(file.decode_all()?);
+    }
+    let clusters = decoded.as_ref().context("decoded clusters")?;
+    let grid = file.header.grid;
+    let mut out = Vec::new();
+    for &c in set {
+        let cluster = clusters.get(c as usize).context("cluster index")?;
+        let at = |i: u8| cluster.positions.get(i as usize).map(|q| grid.decode(*q).map(f64::from));
+        for t in cluster.indices.chunks_exact(3) {
+            if let (Some(a), Some(b), Some(c)) = (at(t[0]), at(t[1]), at(t[2])) {
+                out.push([a, b, c]);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// View depths of pixel (x, y) and its 8 neighbours where they are not background, from a
+/// reverse-Z depth buffer of width `w`.
+fn neighbour_depths(depth: &[f32], x: usize, y: usize, w: usize, z_near: f32) -> Vec<f32> {
+    let h = depth.len() / w.max(1);
+    window(x, y, w, h, 1)
+        .filter_map(|(qx, qy)| depth.get(qy * w + qx).filter(|&&d| d > 0.0).map(|d| z_near / d))
+        .collect()
 }
 
 /// Depth differences of one render against the full-detail render of the same camera.
