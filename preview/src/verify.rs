@@ -6,7 +6,10 @@
 //!    each camera the GPU's projected errors of every cluster are also compared bit for bit
 //!    with `select::projected_error`, which shows any arithmetic drift before it flips a choice.
 //! 2. **Cracks.** From cameras outside the bounds (so outside a closed mesh), the selected cut
-//!    is drawn with back faces in pure red; any red pixel is a hole or a T-junction.
+//!    is drawn with back faces in pure red. A red pixel within the depth tolerance of 3. is a
+//!    fold within the error (or the full-detail surface itself seen from behind); one beyond
+//!    it is a hole (or a T-junction) unless the full-detail surface is seen from behind there,
+//!    unenclosed: open geometry, judged by [`crate::exposed`].
 //! 3. **Depth.** The same renders' depth against the τ = 0 render (full detail) of the camera:
 //!    a cluster drawn at threshold τ has `projected(own) ≤ τ`, so its stored object-space error
 //!    is at most `τ · dist / k` (k = H/2 · proj11, `dist` ≥ the distance of any of its points:
