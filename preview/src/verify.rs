@@ -31,7 +31,7 @@ use serde_json::{json, Value};
 
 use crate::camera::{crack_eyes, selection_eyes, Camera};
 use crate::exposed::ExposureTest;
-use crate::gpu_types::{FLAG_FRUSTUM_CULL, FLAG_WRITE_PROJECTED};
+use crate::gpu_types::{FLAG_DROP_SOME, FLAG_FRUSTUM_CULL, FLAG_WRITE_PROJECTED};
 use crate::image::{count_flagged, count_model, write_png, FLAG_RGBA};
 use crate::scene::SceneData;
 use crate::vk::Renderer;
@@ -406,7 +406,11 @@ pub fn verify(
                     // triangle (its vertices are snapped to the sub-pixel grid): add what the
                     // pixel centre's ray sees of the cut.
                     if cut_test.is_none() {
-                        let set = view_cut(&file.groups, &file.clusters, &camera.view_params(), tau);
+                        let mut set = view_cut(&file.groups, &file.clusters, &camera.view_params(), tau);
+                        // What the GPU drew: the test hook drops every fifth cluster index.
+                        if options.crack_flags & FLAG_DROP_SOME != 0 {
+                            set.retain(|c| c % 5 != 0);
+                        }
                         cut_test = Some(ExposureTest::new(&camera, triangles(file, &mut decoded, &set)?));
                     }
                     depths.extend(cut_test.as_ref().and_then(|t| t.first_back_depth(x, y)));
