@@ -383,44 +383,11 @@ pub fn verify(
             // folding within its error (a tiny part flattened or turned over); one beyond it
             // shows the far inside (a hole) unless the full-detail surface is itself seen
             // from behind there (open geometry, crate::exposed).
-            let candidates: Vec<usize> = (0..depth.beyond.len())
-                .filter(|&i| depth.beyond[i] && frame.rgba[i * 4..i * 4 + 4] == FLAG_RGBA)
-                .collect();
-            let mut holes = 0u64;
-            let mut first_hole = None;
-            let mut cut_test: Option<ExposureTest> = None;
-            if !candidates.is_empty() {
-                if exposure.is_none() {
-                    let set = view_cut(&file.groups, &file.clusters, &camera.view_params(), 0.0);
-                    exposure = Some(ExposureTest::new(&camera, triangles(file, &mut decoded, &set)?));
-                }
-                let test = exposure.as_ref().context("exposure test")?;
-                let cut_depth = frame.depth.as_deref().unwrap_or_default();
-                let k = camera.height as f64 * 0.5 * camera.proj_y as f64;
-                let factor = options.depth_error_factor as f64;
-                let tolerance = |t: f64| factor * (tau as f64 * t / k + t * 1e-5);
-                for &i in &candidates {
-                    let (x, y) = (i % options.width as usize, i / options.width as usize);
-                    let mut depths = neighbour_depths(cut_depth, x, y, options.width as usize, camera.z_near);
-                    // At an edge-on triangle the rasterizer's depth can lie far off the
-                    // triangle (its vertices are snapped to the sub-pixel grid): add what the
-                    // pixel centre's ray sees of the cut.
-                    if cut_test.is_none() {
-                        let mut set = view_cut(&file.groups, &file.clusters, &camera.view_params(), tau);
-                        // What the GPU drew: the test hook drops every fifth cluster index.
-                        if options.crack_flags & FLAG_DROP_SOME != 0 {
-                            set.retain(|c| c % 5 != 0);
-                        }
-                        cut_test = Some(ExposureTest::new(&camera, triangles(file, &mut decoded, &set)?));
-                    }
-                    depths.extend(cut_test.as_ref().and_then(|t| t.first_back_depth(x, y)));
-                    if !test.exposed(x, y, &depths, tau.ceil() as usize + 1, tolerance) {
-                        holes += 1;
-                        first_hole.get_or_insert([x as u32, y as u32]);
-                    }
-                }
-                report.max_exposed_pixels = report.max_exposed_pixels.max(candidates.len() as u64 - holes);
-            }
+            let cut_depth = frame.depth.as_deref().unwrap_or_default();
+            let judged =
+                CrackRender { camera: &camera, tau, rgba: &frame.rgba, depth: cut_depth, beyond: &depth.beyond };
+            let (holes, exposed, first_hole) = judged.holes(file, &mut decoded, &mut exposure, options)?;
+            report.max_exposed_pixels = report.max_exposed_pixels.max(exposed);
             if holes > report.max_hole_pixels {
                 report.max_hole_pixels = holes;
                 report.worst_hole = first_hole.map(|pixel| (eye, tau, holes, pixel));
@@ -450,6 +417,66 @@ pub fn verify(
         report.min_model_pixels = 0;
     }
     Ok(report)
+}
+
+/// One crack render to judge: its flagged pixels beyond the depth tolerance are holes or
+/// exposed (crate::exposed).
+struct CrackRender<'a> {
+    camera: &'a Camera,
+    tau: f32,
+    rgba: &'a [u8],
+    /// Reverse-Z depth.
+    depth: &'a [f32],
+    /// Per pixel: beyond the depth tolerance of the full-detail render.
+    beyond: &'a [bool],
+}
+
+impl CrackRender<'_> {
+    /// (hole pixels, exposed pixels, the first hole pixel). `exposure` is the camera's test
+    /// over the full-detail triangles, built here on first need.
+    fn holes(
+        &self,
+        file: &MresFile,
+        decoded: &mut Option<Vec<DecodedCluster>>,
+        exposure: &mut Option<ExposureTest>,
+        options: &VerifyOptions,
+    ) -> Result<(u64, u64, Option<[u32; 2]>)> {
+        let candidates: Vec<usize> =
+            (0..self.beyond.len()).filter(|&i| self.beyond[i] && self.rgba[i * 4..i * 4 + 4] == FLAG_RGBA).collect();
+        if candidates.is_empty() {
+            return Ok((0, 0, None));
+        }
+        let camera = self.camera;
+        if exposure.is_none() {
+            let set = view_cut(&file.groups, &file.clusters, &camera.view_params(), 0.0);
+            *exposure = Some(ExposureTest::new(camera, triangles(file, decoded, &set)?));
+        }
+        let full = exposure.as_ref().context("exposure test")?;
+        // At an edge-on triangle the rasterizer's depth can lie far off the triangle (its
+        // vertices are snapped to the sub-pixel grid): what the pixel centre's ray sees of the
+        // cut is tried too.
+        let mut set = view_cut(&file.groups, &file.clusters, &camera.view_params(), self.tau);
+        // What the GPU drew: the test hook drops every fifth cluster index.
+        if options.crack_flags & FLAG_DROP_SOME != 0 {
+            set.retain(|c| c % 5 != 0);
+        }
+        let cut = ExposureTest::new(camera, triangles(file, decoded, &set)?);
+        let k = camera.height as f64 * 0.5 * camera.proj_y as f64;
+        let (factor, tau) = (options.depth_error_factor as f64, self.tau as f64);
+        let tolerance = |t: f64| factor * (tau * t / k + t * 1e-5);
+        let (w, radius) = (camera.width as usize, self.tau.ceil() as usize + 1);
+        let (mut holes, mut first) = (0, None);
+        for &i in &candidates {
+            let (x, y) = (i % w, i / w);
+            let mut depths = neighbour_depths(self.depth, x, y, w, camera.z_near);
+            depths.extend(cut.first_back_depth(x, y));
+            if !full.exposed(x, y, &depths, radius, tolerance) {
+                holes += 1;
+                first.get_or_insert([x as u32, y as u32]);
+            }
+        }
+        Ok((holes, candidates.len() as u64 - holes, first))
+    }
 }
 
 /// The triangles of the clusters `set`, object space; decodes the file's clusters on first use.
