@@ -14,6 +14,7 @@
 
 pub mod bench;
 pub mod camera;
+pub mod exposed;
 pub mod fly;
 pub mod gpu_types;
 pub mod image;

@@ -375,13 +375,14 @@ fn run(args: Args) -> Result<ExitCode> {
             println!("  disagreement: {}", d.to_json());
         }
         println!(
-            "cracks: {} renders ({} cameras x {:?} px, {}x{}), max hole pixels {} (back faces beyond the depth tolerance), max flagged pixels {}, renders with flagged pixels {}, min model pixels {}",
+            "cracks: {} renders ({} cameras x {:?} px, {}x{}), max hole pixels {} (back faces beyond the depth tolerance, enclosed by the full-detail surface), max exposed pixels {} (beyond it, but the full-detail surface seen from behind), max flagged pixels {}, renders with flagged pixels {}, min model pixels {}",
             report.crack_renders,
             options.crack_cameras,
             options.crack_taus,
             width,
             height,
             report.max_hole_pixels,
+            report.max_exposed_pixels,
             report.max_flagged_pixels,
             report.flagged_renders,
             report.min_model_pixels

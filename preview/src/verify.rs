@@ -6,7 +6,10 @@
 //!    each camera the GPU's projected errors of every cluster are also compared bit for bit
 //!    with `select::projected_error`, which shows any arithmetic drift before it flips a choice.
 //! 2. **Cracks.** From cameras outside the bounds (so outside a closed mesh), the selected cut
-//!    is drawn with back faces in pure red; any red pixel is a hole or a T-junction.
+//!    is drawn with back faces in pure red. A red pixel within the depth tolerance of 3. is a
+//!    fold within the error (or the full-detail surface itself seen from behind); one beyond
+//!    it is a hole (or a T-junction) unless the full-detail surface is seen from behind there,
+//!    unenclosed: open geometry, judged by [`crate::exposed`].
 //! 3. **Depth.** The same renders' depth against the τ = 0 render (full detail) of the camera:
 //!    a cluster drawn at threshold τ has `projected(own) ≤ τ`, so its stored object-space error
 //!    is at most `τ · dist / k` (k = H/2 · proj11, `dist` ≥ the distance of any of its points:
@@ -20,13 +23,15 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context as _, Result};
+use mres_format::page::DecodedCluster;
 use mres_format::select::{projected_error, view_cut};
 use mres_format::{MresFile, NO_GROUP};
 use serde_json::{json, Value};
 
 use crate::camera::{crack_eyes, selection_eyes, Camera};
-use crate::gpu_types::{FLAG_FRUSTUM_CULL, FLAG_WRITE_PROJECTED};
+use crate::exposed::ExposureTest;
+use crate::gpu_types::{FLAG_DROP_SOME, FLAG_FRUSTUM_CULL, FLAG_WRITE_PROJECTED};
 use crate::image::{count_flagged, count_model, write_png, FLAG_RGBA};
 use crate::scene::SceneData;
 use crate::vk::Renderer;
@@ -144,6 +149,11 @@ pub struct VerifyReport {
     /// Most flagged pixels in one render that lie beyond the depth tolerance of the
     /// full-detail surface: holes (flagged pixels within it are folds within the error).
     pub max_hole_pixels: u64,
+    /// Most flagged pixels in one render that lie beyond the depth tolerance but show the
+    /// full-detail surface itself from behind, unenclosed (open geometry; crate::exposed).
+    pub max_exposed_pixels: u64,
+    /// The render with the most hole pixels: (eye, tau, hole pixels, its first hole pixel).
+    pub worst_hole: Option<([f32; 3], f32, u64, [u32; 2])>,
     /// Renders with any flagged pixel.
     pub flagged_renders: usize,
     /// Fewest model pixels in one crack render (shows the model was in view).
@@ -204,8 +214,10 @@ impl VerifyReport {
                 "renders": self.crack_renders,
                 "max_flagged_pixels": self.max_flagged_pixels,
                 "max_hole_pixels": self.max_hole_pixels,
+                "max_exposed_pixels": self.max_exposed_pixels,
                 "flagged_renders": self.flagged_renders,
                 "min_model_pixels": self.min_model_pixels,
+                "worst_hole": self.worst_hole.map(|(eye, tau, n, pixel)| json!({"eye": eye, "tau": tau, "holes": n, "first_pixel": pixel})),
                 "worst": self.worst_crack.map(|(eye, tau, n)| json!({"eye": eye, "tau": tau, "flagged": n})),
             },
             "depth": {
@@ -245,6 +257,7 @@ pub fn verify(
     options: &VerifyOptions,
 ) -> Result<VerifyReport> {
     let mut report = VerifyReport { min_selected: usize::MAX, min_model_pixels: u64::MAX, ..Default::default() };
+    let mut decoded = None;
     let bounds = scene.bounds;
     let n = file.clusters.len() as u32;
 
@@ -346,6 +359,7 @@ pub fn verify(
             options.height,
         )?;
         let full_depth = full.depth.unwrap_or_default();
+        let mut exposure: Option<ExposureTest> = None;
         for &tau in &options.crack_taus {
             let flags = FLAG_FRUSTUM_CULL | options.crack_flags;
             let frame = renderer.render_with_depth(
@@ -367,11 +381,17 @@ pub fn verify(
             let flagged = count_flagged(&frame.rgba);
             // A back face within the depth tolerance of the full-detail surface is the cut
             // folding within its error (a tiny part flattened or turned over); one beyond it
-            // shows the far inside: a hole.
-            let holes =
-                frame.rgba.chunks_exact(4).zip(&depth.beyond).filter(|(p, &beyond)| *p == FLAG_RGBA && beyond).count()
-                    as u64;
-            report.max_hole_pixels = report.max_hole_pixels.max(holes);
+            // shows the far inside (a hole) unless the full-detail surface is itself seen
+            // from behind there (open geometry, crate::exposed).
+            let cut_depth = frame.depth.as_deref().unwrap_or_default();
+            let judged =
+                CrackRender { camera: &camera, tau, rgba: &frame.rgba, depth: cut_depth, beyond: &depth.beyond };
+            let (holes, exposed, first_hole) = judged.holes(file, &mut decoded, &mut exposure, options)?;
+            report.max_exposed_pixels = report.max_exposed_pixels.max(exposed);
+            if holes > report.max_hole_pixels {
+                report.max_hole_pixels = holes;
+                report.worst_hole = first_hole.map(|pixel| (eye, tau, holes, pixel));
+            }
             let model = count_model(&frame.rgba);
             report.crack_renders += 1;
             report.min_model_pixels = report.min_model_pixels.min(model);
@@ -397,6 +417,95 @@ pub fn verify(
         report.min_model_pixels = 0;
     }
     Ok(report)
+}
+
+/// One crack render to judge: its flagged pixels beyond the depth tolerance are holes or
+/// exposed (crate::exposed).
+struct CrackRender<'a> {
+    camera: &'a Camera,
+    tau: f32,
+    rgba: &'a [u8],
+    /// Reverse-Z depth.
+    depth: &'a [f32],
+    /// Per pixel: beyond the depth tolerance of the full-detail render.
+    beyond: &'a [bool],
+}
+
+impl CrackRender<'_> {
+    /// (hole pixels, exposed pixels, the first hole pixel). `exposure` is the camera's test
+    /// over the full-detail triangles, built here on first need.
+    fn holes(
+        &self,
+        file: &MresFile,
+        decoded: &mut Option<Vec<DecodedCluster>>,
+        exposure: &mut Option<ExposureTest>,
+        options: &VerifyOptions,
+    ) -> Result<(u64, u64, Option<[u32; 2]>)> {
+        let candidates: Vec<usize> =
+            (0..self.beyond.len()).filter(|&i| self.beyond[i] && self.rgba[i * 4..i * 4 + 4] == FLAG_RGBA).collect();
+        if candidates.is_empty() {
+            return Ok((0, 0, None));
+        }
+        let camera = self.camera;
+        if exposure.is_none() {
+            let set = view_cut(&file.groups, &file.clusters, &camera.view_params(), 0.0);
+            *exposure = Some(ExposureTest::new(camera, triangles(file, decoded, &set)?));
+        }
+        let full = exposure.as_ref().context("exposure test")?;
+        // At an edge-on triangle the rasterizer's depth can lie far off the triangle (its
+        // vertices are snapped to the sub-pixel grid): what the pixel centre's ray sees of the
+        // cut is tried too.
+        let mut set = view_cut(&file.groups, &file.clusters, &camera.view_params(), self.tau);
+        // What the GPU drew: the test hook drops every fifth cluster index.
+        if options.crack_flags & FLAG_DROP_SOME != 0 {
+            set.retain(|c| c % 5 != 0);
+        }
+        let cut = ExposureTest::new(camera, triangles(file, decoded, &set)?);
+        let k = camera.height as f64 * 0.5 * camera.proj_y as f64;
+        let (factor, tau) = (options.depth_error_factor as f64, self.tau as f64);
+        let tolerance = |t: f64| factor * (tau * t / k + t * 1e-5);
+        let (w, radius) = (camera.width as usize, self.tau.ceil() as usize + 1);
+        let (mut holes, mut first) = (0, None);
+        for &i in &candidates {
+            let (x, y) = (i % w, i / w);
+            let mut depths = neighbour_depths(self.depth, x, y, w, camera.z_near);
+            depths.extend(cut.first_back_depth(x, y));
+            if !full.exposed(x, y, &depths, radius, tolerance) {
+                holes += 1;
+                first.get_or_insert([x as u32, y as u32]);
+            }
+        }
+        Ok((holes, candidates.len() as u64 - holes, first))
+    }
+}
+
+/// The triangles of the clusters `set`, object space; decodes the file's clusters on first use.
+fn triangles(file: &MresFile, decoded: &mut Option<Vec<DecodedCluster>>, set: &[u32]) -> Result<Vec<[[f64; 3]; 3]>> {
+    if decoded.is_none() {
+        *decoded = Some(file.decode_all()?);
+    }
+    let clusters = decoded.as_ref().context("decoded clusters")?;
+    let grid = file.header.grid;
+    let mut out = Vec::new();
+    for &c in set {
+        let cluster = clusters.get(c as usize).context("cluster index")?;
+        let at = |i: u8| cluster.positions.get(i as usize).map(|q| grid.decode(*q).map(f64::from));
+        for t in cluster.indices.chunks_exact(3) {
+            if let (Some(a), Some(b), Some(c)) = (at(t[0]), at(t[1]), at(t[2])) {
+                out.push([a, b, c]);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// View depths of pixel (x, y) and its 8 neighbours where they are not background, from a
+/// reverse-Z depth buffer of width `w`.
+fn neighbour_depths(depth: &[f32], x: usize, y: usize, w: usize, z_near: f32) -> Vec<f32> {
+    let h = depth.len() / w.max(1);
+    window(x, y, w, h, 1)
+        .filter_map(|(qx, qy)| depth.get(qy * w + qx).filter(|&&d| d > 0.0).map(|d| z_near / d))
+        .collect()
 }
 
 /// Depth differences of one render against the full-detail render of the same camera.

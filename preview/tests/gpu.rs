@@ -16,9 +16,18 @@ use preview::vk::{validation_available, ContextOptions, Device, DrawPath, Messag
 /// simplified into one 12-triangle root cluster. Faces share their edge vertices' grid
 /// coordinates, so both cuts are watertight.
 fn cube_dag(n: i32) -> Dag {
+    box_dag(n, false)
+}
+
+/// [`cube_dag`], or with `open` the same box without its top (+y) face at either level: an open
+/// box whose inside (back faces) shows through the top.
+fn box_dag(n: i32, open: bool) -> Dag {
     let mut clusters = Vec::new();
     for axis in 0..3 {
         for positive in [false, true] {
+            if open && axis == 1 && positive {
+                continue;
+            }
             let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
             let mut positions = Vec::new();
             for j in 0..=n {
@@ -55,7 +64,9 @@ fn cube_dag(n: i32) -> Dag {
     let corners: Vec<[i32; 3]> = (0..8).map(|c| [(c & 1) * n, ((c >> 1) & 1) * n, ((c >> 2) & 1) * n]).collect();
     // The 12 triangles of the cube over `corners`, counter-clockwise from outside.
     let faces = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
-    let indices = faces.iter().flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
+    // [2, 6, 7, 3] is the top: corners with y = 1.
+    let indices =
+        faces.iter().filter(|f| !open || f[0] != 2).flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]]).collect();
     clusters.push(DagCluster {
         group: 1,
         own_group: 0,
@@ -75,7 +86,7 @@ fn cube_dag(n: i32) -> Dag {
             normal_bits: 0,
             position_bits: 16,
             level_count: 0,
-            source_triangles: 12 * (n * n) as u64,
+            source_triangles: if open { 10 } else { 12 } * (n * n) as u64,
         },
         groups: vec![
             Group { sphere: sphere(1.75), error: 0.05, level: 0, first_cluster: 0, cluster_count: 0, page: 0 },
@@ -171,6 +182,37 @@ fn verify_fails_on_holes_but_not_on_folds() {
     let report = verify(&mut renderer, &file, &scene, &options).unwrap();
     assert!(report.max_hole_pixels > 100, "{:#?}", report.to_json());
     assert!(!report.passed());
+    drop(renderer);
+    drop(device);
+    assert_silent(&counts);
+}
+
+#[test]
+fn open_box_passes_with_its_inside_seen_and_fails_with_clusters_dropped() {
+    // Seen through the open top, the inside of the box is the full-detail surface itself seen
+    // from behind: flagged, no hole. With every fifth cluster dropped, the inside shows through
+    // a missing wall as well, behind the wall's front face: holes, as on the closed cube.
+    let Some((device, counts)) = device("open box") else { return };
+    let file = MresFile::parse(write_mres(&box_dag(6, true), 3).expect("write")).expect("parse");
+    let scene = SceneData::from_file(&file).unwrap();
+    let mut renderer = Renderer::new(&device, &scene, RendererOptions::default()).unwrap();
+    let options = VerifyOptions {
+        selection_cameras: 4,
+        crack_cameras: 12,
+        crack_taus: vec![0.0],
+        width: 128,
+        height: 128,
+        ..Default::default()
+    };
+    let report = verify(&mut renderer, &file, &scene, &options).unwrap();
+    println!("{}", report.to_json());
+    assert!(report.passed(), "{:#?}", report.to_json());
+    assert!(report.max_flagged_pixels > 100, "the inside was never seen: {:#?}", report.to_json());
+    let dropped =
+        verify(&mut renderer, &file, &scene, &VerifyOptions { crack_flags: FLAG_DROP_SOME, ..options }).unwrap();
+    println!("{}", dropped.to_json());
+    assert!(dropped.max_hole_pixels > 100, "{:#?}", dropped.to_json());
+    assert!(!dropped.passed());
     drop(renderer);
     drop(device);
     assert_silent(&counts);

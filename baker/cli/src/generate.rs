@@ -172,6 +172,67 @@ pub fn cards(count: u32) -> SourceMesh {
     mesh(positions, indices)
 }
 
+/// An open multi-part scene like an architecture kit: `count` rooms on a square grid, each a
+/// floor and four one-sided walls facing inwards (8×8 quads each, no ceiling), two walls with a
+/// window hole of 2×2 quads, an open crate (a box without its lid, facing outwards, 4×4 quads a
+/// side) on the floor, and six two-triangle cards leaning in the room. 796 triangles per room.
+/// Seen from outside, the walls' backs, the inside of the crate and the cards' backs are the
+/// surface itself seen from behind.
+pub fn rooms(count: u32) -> SourceMesh {
+    let side = (count as f32).sqrt().ceil().max(1.0) as u32;
+    let (mut positions, mut indices) = (Vec::new(), Vec::new());
+    let mut quads = |o: [f32; 3], du: [f32; 3], dv: [f32; 3], k: u32, hole: &dyn Fn(u32, u32) -> bool| {
+        let base = positions.len() as u32;
+        for j in 0..=k {
+            for i in 0..=k {
+                let (a, b) = (i as f32 / k as f32, j as f32 / k as f32);
+                // On a 1/1024 grid, so that sheets meant to meet share their vertices exactly.
+                positions.push([0, 1, 2].map(|c| ((o[c] + a * du[c] + b * dv[c]) * 1024.0).round() / 1024.0));
+            }
+        }
+        let at = |i: u32, j: u32| base + j * (k + 1) + i;
+        for j in 0..k {
+            for i in (0..k).filter(|&i| !hole(i, j)) {
+                // Counter-clockwise seen from the side du × dv points to.
+                indices.extend_from_slice(&[
+                    at(i, j),
+                    at(i + 1, j),
+                    at(i + 1, j + 1),
+                    at(i, j),
+                    at(i + 1, j + 1),
+                    at(i, j + 1),
+                ]);
+            }
+        }
+    };
+    let solid = |_: u32, _: u32| false;
+    let window = |i: u32, j: u32| (3..5).contains(&i) && (3..5).contains(&j);
+    let (w, h) = (4.0f32, 3.0f32);
+    for r in 0..count {
+        let (x, z) = ((r % side) as f32 * (w + 1.0), (r / side) as f32 * (w + 1.0));
+        let p = |dx: f32, dy: f32, dz: f32| [x + dx, dy, z + dz];
+        quads(p(0.0, 0.0, 0.0), [0.0, 0.0, w], [w, 0.0, 0.0], 8, &solid);
+        quads(p(0.0, 0.0, 0.0), [w, 0.0, 0.0], [0.0, h, 0.0], 8, &window);
+        quads(p(w, 0.0, w), [-w, 0.0, 0.0], [0.0, h, 0.0], 8, &solid);
+        quads(p(0.0, 0.0, w), [0.0, 0.0, -w], [0.0, h, 0.0], 8, &window);
+        quads(p(w, 0.0, 0.0), [0.0, 0.0, w], [0.0, h, 0.0], 8, &solid);
+        // The crate: four sides and a bottom facing outwards, open at the top.
+        let (c, s) = (p(1.0, 0.0, 1.2), 0.8 + 0.1 * (r % 4) as f32);
+        let q = |dx: f32, dy: f32, dz: f32| [c[0] + dx * s, c[1] + dy * s, c[2] + dz * s];
+        quads(q(0.0, 0.0, 0.0), [0.0, s, 0.0], [s, 0.0, 0.0], 4, &solid);
+        quads(q(1.0, 0.0, 1.0), [0.0, s, 0.0], [-s, 0.0, 0.0], 4, &solid);
+        quads(q(0.0, 0.0, 1.0), [0.0, s, 0.0], [0.0, 0.0, -s], 4, &solid);
+        quads(q(1.0, 0.0, 0.0), [0.0, s, 0.0], [0.0, 0.0, s], 4, &solid);
+        quads(q(0.0, 0.0, 0.0), [s, 0.0, 0.0], [0.0, 0.0, s], 4, &solid);
+        for k in 0..6 {
+            let a = k as f32 * 1.1 + r as f32 * 0.37;
+            let base = p(2.2 + 0.25 * k as f32, 0.0, 0.6 + 0.5 * k as f32);
+            quads(base, [0.5 * a.cos(), 0.0, 0.5 * a.sin()], [0.1, 0.9, 0.05], 1, &solid);
+        }
+    }
+    mesh(positions, indices)
+}
+
 /// The cube-sphere with defects real scans and CAD exports have: every 97th triangle removed
 /// (holes), every 89th duplicated, and a fin of two triangles on one edge per 1,000 triangles
 /// (non-manifold edges used three times).
@@ -210,5 +271,37 @@ mod tests {
         let seamed = seamed_sphere(10);
         assert_eq!(seamed.triangle_count(), 1200);
         assert_eq!(seamed.positions.len(), 6 * 121);
+        assert_eq!(rooms(3).triangle_count(), 3 * 796);
+    }
+
+    /// Edges used by exactly one triangle (open borders), by position.
+    fn open_edges(m: &SourceMesh) -> usize {
+        let key = |i: u32| m.positions[i as usize].map(f32::to_bits);
+        let mut uses = std::collections::HashMap::new();
+        for t in m.indices.chunks_exact(3) {
+            for e in 0..3 {
+                let (a, b) = (key(t[e]), key(t[(e + 1) % 3]));
+                *uses.entry(if a < b { (a, b) } else { (b, a) }).or_insert(0) += 1;
+            }
+        }
+        uses.values().filter(|&&n| n == 1).count()
+    }
+
+    #[test]
+    fn rooms_are_open_with_window_holes_and_face_inwards() {
+        let m = rooms(1);
+        // By position the floor and the walls are one open box and the crate another: open
+        // are the walls' top rims (4 × 8 edges), the two windows (8 each), the crate's rim
+        // (4 × 4) and the cards' outlines (4 each).
+        assert_eq!(open_edges(&m), 4 * 8 + 2 * 8 + 4 * 4 + 6 * 4);
+        // The floor faces up and the first wall (z = 0) faces +z, into the room.
+        let normal = |t: usize| {
+            let p = |k: usize| m.positions[m.indices[3 * t + k] as usize];
+            let (a, b, c) = (p(0), p(1), p(2));
+            let (u, v) = ([0, 1, 2].map(|i| b[i] - a[i]), [0, 1, 2].map(|i| c[i] - a[i]));
+            [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+        };
+        assert!(normal(0)[1] > 0.0);
+        assert!(normal(128)[2] > 0.0);
     }
 }

@@ -211,6 +211,8 @@ enum MeshKind {
     Cards,
     /// Sphere N with holes, duplicate triangles and non-manifold fins.
     Defects,
+    /// N rooms: one-sided walls with window holes, open crates and cards (796 triangles each).
+    Rooms,
 }
 
 #[derive(Args)]
@@ -445,6 +447,7 @@ fn generate_cmd(a: GenerateArgs) -> Result<ExitCode> {
         MeshKind::SeamedSphere => generate::seamed_sphere(a.n),
         MeshKind::Cards => generate::cards(a.n),
         MeshKind::Defects => generate::defects(a.n),
+        MeshKind::Rooms => generate::rooms(a.n),
     };
     let triangles = mesh.triangle_count();
     write_obj(&mesh, out)?;
