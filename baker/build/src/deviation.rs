@@ -32,6 +32,11 @@ pub const SAMPLING_MARGIN: f64 = 1.0;
 /// would otherwise pass their error on to every ancestor. Measured: see docs/BENCHMARKS.md.
 pub const OUTLIER_RATIO: f64 = 4.0;
 
+/// A level-0 triangle whose radius is at most this fraction of the members' error is measured
+/// at its centroid plus its radius (see `Sides::small`): it loosens the bound by at most about
+/// this fraction, and measures one point instead of about three.
+const SMALL_TRIANGLE: f64 = 0.05;
+
 /// Re-simplifications of one outlier group at most; each locks more.
 const OUTLIER_RETRIES: usize = 3;
 
@@ -83,7 +88,8 @@ pub fn simplify_measured(
     part_size: &[f32],
 ) -> Option<(Simplified, f32)> {
     let (members, triangles, errors) = (reference.members_error, &reference.triangles[..], &reference.errors);
-    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.samples.as_deref() };
+    let small = SMALL_TRIANGLE * members as f64;
+    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.samples.as_deref(), small };
     let error_of = |s: &Simplified, hot_above: Option<f64>| {
         let (total, hot) = measure(mesh, &sides, &s.indices, part_size, s.error as f64, hot_above, reference.original);
         (stored(total, s.error).max(members), hot)
@@ -170,9 +176,12 @@ pub fn assign_owned(mesh: &WeldedMesh, owned: &[Owned], children: &[Vec<u32>], e
         let (_, near) = bvh.nearest_squared(&tris, sample_point(&tri, 6), close2 / 16.0, hint);
         hint = near;
         let mut touched: Vec<usize> = Vec::new();
+        // A small triangle goes whole to the centroid's cluster: each of its points is within
+        // a quarter of the error plus its radius of that cluster.
+        let whole = radius(&tri) <= error * 0.5;
         for b in (0..7).filter(|b| mask >> b & 1 != 0) {
             let p = sample_point(&tri, b);
-            let nearest = if point_triangle_distance2(p, &tris[near]) <= close2 {
+            let nearest = if whole || point_triangle_distance2(p, &tris[near]) <= close2 {
                 near
             } else {
                 bvh.nearest_squared(&tris, p, close2, near).1
@@ -202,7 +211,7 @@ pub fn group_error(
     simplifier_error: f32,
 ) -> f32 {
     let errors = vec![members_error; input.len() / 3];
-    let sides = Sides { input, triangle_errors: &errors, owned: None };
+    let sides = Sides { input, triangle_errors: &errors, owned: None, small: 0.0 };
     let (total, _) = measure(mesh, &sides, output, part_size, simplifier_error as f64, None, None);
     stored(total, simplifier_error).max(members_error)
 }
@@ -213,6 +222,22 @@ struct Sides<'a> {
     input: &'a [u32],
     triangle_errors: &'a [f32],
     owned: Option<&'a [u8]>,
+    /// With `owned`: a triangle whose corners are all within this of its centroid is measured
+    /// at its centroid only, with that radius added: every point of it is within the radius of
+    /// the centroid, and distance to a surface changes by at most the distance moved (so the
+    /// bound holds for all its points, not just samples). Upper levels, whose errors dwarf the
+    /// level-0 triangles, then measure one point per triangle.
+    small: f64,
+}
+
+/// The centroid's bit among a triangle's samples (see [`Owned`]).
+const CENTROID: u8 = 1 << 6;
+
+/// Largest distance from a triangle's centroid to its corners (so to any of its points).
+fn radius(t: &Triangle<f32>) -> f32 {
+    let c = sample_point(t, 6);
+    t.iter().map(|p| (0..3).map(|k| (p[k] - c[k]) * (p[k] - c[k])).sum::<f32>().sqrt()).fold(0.0, f32::max)
+        * (1.0 + 1e-5)
 }
 
 /// The whole level-0 surface of a welded mesh, in object coordinates, for measuring output
@@ -304,9 +329,15 @@ fn measure(
     };
     let (input_tris, output_tris) = (triangles(input), triangles(output));
     let (mut input_duty, output_duty) = duties(mesh, input, output, triangle_errors, sides.owned.is_some());
+    // Per input triangle, a distance added to its samples' (see `Sides::small`).
+    let mut reach_of = vec![0.0f32; input_tris.len()];
     if let Some(owned) = sides.owned {
-        for (d, o) in input_duty.iter_mut().zip(owned) {
+        for ((d, o), (tri, r)) in input_duty.iter_mut().zip(owned).zip(input_tris.iter().zip(&mut reach_of)) {
             *d &= o;
+            let radius = radius(tri);
+            if *d != 0 && (radius as f64) <= sides.small {
+                (*d, *r) = (CENTROID, radius);
+            }
         }
     }
 
@@ -375,7 +406,9 @@ fn measure(
     let output_bvh = Bvh::new(&output_tris);
     let mut hint = usize::MAX;
     for pass in [0b000_0111u8, 0b111_1000] {
-        for (((t, tri), &duty), &e) in input.chunks_exact(3).zip(&input_tris).zip(&input_duty).zip(triangle_errors) {
+        let triangles = input.chunks_exact(3).zip(&input_tris).zip(&input_duty).zip(triangle_errors).zip(&reach_of);
+        for ((((t, tri), &duty), &e), &r) in triangles {
+            let e = e + r;
             // A point farther than its part's size counts as that: the part vanished.
             let size = part_size[id(t[0]) as usize];
             for p in samples(*tri, duty & pass) {
