@@ -79,7 +79,7 @@ pub fn oct_encode(n: [f32; 3], bits: u32) -> [u32; 2] {
     [q(x), q(y)]
 }
 
-/// Decodes two `bits`-bit octahedral coordinates to a unit normal (FORMAT.md §5.3).
+/// Decodes two `bits`-bit octahedral coordinates to a unit normal (FORMAT.md §5.4).
 pub fn oct_decode(q: [u32; 2], bits: u32) -> [f32; 3] {
     let max = ((1u32 << bits) - 1) as f32;
     let mut x = q[0] as f32 / max * 2.0 - 1.0;

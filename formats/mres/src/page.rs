@@ -86,7 +86,51 @@ pub(crate) fn decode_page(
         headers.push(head);
         decoded.push(cluster);
     }
+    check_open_blocks(&headers, p)?;
     Ok(Page { index: p, first_cluster: info.first_cluster, bytes, headers, clusters: decoded })
+}
+
+/// The byte range of each data block of the cluster with header `c` (FORMAT.md §5), and
+/// whether it is its open-edge block.
+fn block_ranges(c: &ClusterHeader) -> Vec<(u64, u64, bool)> {
+    let (v, t) = (c.vertex_count as u64, c.triangle_count as u64);
+    let words = |bits: u64| bits.div_ceil(32) * 4;
+    let position_bits: u64 = c.position_bits.iter().map(|&b| b as u64).sum();
+    let normal_bits: u64 = c.normal_bits.iter().map(|&b| b as u64).sum();
+    let lengths = [words(v * position_bits), words(v * normal_bits), v * 4, 3 * t, 2 * t];
+    let mut out: Vec<(u64, u64, bool)> = c
+        .block_offsets
+        .iter()
+        .zip(lengths)
+        .filter(|(&o, _)| o != 0)
+        .map(|(&o, len)| (o as u64, o as u64 + len, false))
+        .collect();
+    if c.edge_flags & ClusterHeader::OPEN_EDGES != 0 {
+        let start = c.block_offsets[ClusterHeader::INDICES] as u64 + (3 * t).next_multiple_of(4);
+        out.push((start, start + words(3 * t), true));
+    }
+    out
+}
+
+/// An open-edge block, which no offset field points to, must not overlap any other block of
+/// the page (FORMAT.md §7): otherwise another cluster's data would read as marks.
+fn check_open_blocks(headers: &[ClusterHeader], p: u32) -> Result<(), MresError> {
+    let mut ranges: Vec<(u64, u64, bool)> = headers.iter().flat_map(block_ranges).collect();
+    if !ranges.iter().any(|r| r.2) {
+        return Ok(());
+    }
+    ranges.sort_unstable();
+    let mut end = 0u64;
+    let mut end_open = false;
+    for &(start, stop, open) in &ranges {
+        if start < end && (open || end_open) && stop > start {
+            return Err(corrupt(format!("page {p}: an open-edge block overlaps another block")));
+        }
+        if stop > end {
+            (end, end_open) = (stop, open);
+        }
+    }
+    Ok(())
 }
 
 /// Reads cluster `index` (whose record is `info`) from its decompressed page `raw`: its
@@ -209,8 +253,7 @@ impl Blocks<'_> {
         Ok(indices.to_vec())
     }
 
-    /// The open-edge block right after the indices block's padding (FORMAT.md §5, "Open
-    /// edges"): 3 bits per triangle, the last word's unused bits zero.
+    /// The open-edge block right after the indices block's padding (FORMAT.md §5.7): 3 bits per triangle, the last word's unused bits zero.
     fn open_edges(&self) -> Result<Vec<u8>, MresError> {
         let triangles = self.head.triangle_count as u64;
         if self.head.edge_flags & ClusterHeader::OPEN_EDGES == 0 {

@@ -417,7 +417,7 @@ impl ClusterHeader {
     pub const NORMAL_BITS: usize = 44;
     /// Offset of `edge_flags`.
     pub const EDGE_FLAGS: usize = 19;
-    /// `edge_flags` bit: the cluster has an open-edge block (FORMAT.md §5, "Open edges").
+    /// `edge_flags` bit: the cluster has an open-edge block (FORMAT.md §5.7).
     pub const OPEN_EDGES: u8 = 1;
     /// Offset of the reserved u16 at the end (zero).
     pub const RESERVED_2: usize = 46;

@@ -488,8 +488,7 @@ fn encode_blocks(c: &DagCluster, h: &Header, index: usize) -> Result<(ClusterHea
 }
 
 /// The indices block: the local indices, followed (after padding to 4 bytes) by the open-edge
-/// block when any edge is marked, which `edge_flags` then announces (FORMAT.md §5, "Open
-/// edges"). The marks sit right after the indices, so they need no offset field of their own.
+/// block when any edge is marked, which `edge_flags` then announces (FORMAT.md §5.7). The marks sit right after the indices, so they need no offset field of their own.
 fn indices_block(c: &DagCluster, header: &mut ClusterHeader) -> Vec<u8> {
     let mut block = c.indices.clone();
     if c.open_edges.iter().any(|&m| m != 0) {
