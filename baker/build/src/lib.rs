@@ -1,5 +1,5 @@
 //! The DAG builder: open a source, weld, shard if large, cluster, group (METIS), simplify
-//! (meshopt, locked borders), and hand the DAG to the `.mres` writer through `encode`
+//! (meshopt, group borders locked, open borders simplified along themselves), and hand the DAG to the `.mres` writer through `encode`
 //! (`docs/ARCHITECTURE.md` "Data flow of one bake").
 #![deny(missing_docs)]
 

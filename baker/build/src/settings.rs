@@ -6,10 +6,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ErrorBound {
-    /// Measured: the sampled two-sided distance between the group's input and output plus the
-    /// error of the member each sample lies on (`deviation.rs`), outlier groups simplified
-    /// again: a bound the validator checks at ratio 1. Costs about 1.7–1.9× the bake time and
-    /// draws more triangles at a given τ (the bound is conservative; docs/BENCHMARKS.md).
+    /// Measured: the sampled two-sided distance between the group's output and the original
+    /// level-0 surface it replaces (`deviation.rs`), outlier groups simplified again: a bound
+    /// the validator checks at ratio 1, and tight (docs/INVARIANTS.md §4). Costs bake time.
     Measured,
     /// meshoptimizer's estimate made monotone, as clusterlod stores it: fast and tight, but not
     /// a bound (the validator measured up to 2.6× it on scans, 40–130× at single spots).

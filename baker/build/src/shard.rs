@@ -10,7 +10,8 @@
 //!    temporary directory, by centroid. Only the vertex attributes stay in memory.
 //! 3. **Shards (stage 1).** Each shard is read back, welded on the whole mesh's grid (so that
 //!    shards meet exactly) and built [`LEVELS_PER_STAGE`] levels like a whole mesh. Its edges
-//!    on the shard border are open in the shard, so they stay locked for those levels. Its
+//!    on the shard border are open in the shard but not marked (only the whole mesh's odd
+//!    edges are), so they stay locked for those levels. Its
 //!    finished clusters go to the [`DagOutput`] right away (the `.mres` encoder keeps them
 //!    compact); its top clusters are kept on the integer grid ([`TopCluster`]).
 //! 4. **Later stages.** The top clusters are cut into new cells whose borders avoid the
@@ -423,7 +424,7 @@ impl ShardContext<'_> {
                 .collect::<Result<_, _>>()?;
             top = dag.collect(results, stats);
             if triangles_of(&top) as f64 > SHARD_STOP_REDUCTION * triangles as f64 {
-                return Ok(top); // the rest is locked geometry (open edges): merging it whole is all that helps
+                return Ok(top); // the rest is locked geometry (cell borders): merging it whole is all that helps
             }
         }
     }
