@@ -1,12 +1,15 @@
 //! The discrete-LOD alternative of the benchmark: the file's level-0 mesh welded by grid
 //! coordinate, then simplified with meshoptimizer (`meshopt::simplify`) to half the triangles
-//! per level, each level with its object-space error (meshopt's relative error × its scale,
-//! made monotone). A renderer picks one level per instance by the same screen-space error rule
+//! per level, each level with its object-space error: the two-sided distance between the level
+//! and the original, measured as the validator measures a DAG cut (`mres_check::distance`:
+//! every triangle's centroid and edge midpoints, both ways), made monotone. Both sides of the
+//! comparison are then honest, and compared at the same measure. A renderer picks one level per instance by the same screen-space error rule
 //! as the DAG (coarsest level whose projected error is ≤ τ at the instance's nearest point).
 
 use std::collections::HashMap;
 
 use anyhow::{Context as _, Result};
+use mres_check::distance::{two_sided_with, Surface};
 use mres_format::{MresFile, NO_GROUP};
 
 /// One level of the chain: a range of the shared index buffer.
@@ -60,22 +63,32 @@ impl LodChain {
         }
         let bytes: &[u8] = bytemuck::cast_slice(&positions);
         let adapter = meshopt::VertexDataAdapter::new(bytes, 12, 0).context("vertex adapter")?;
-        let scale = meshopt::simplify_scale(&adapter);
         let mut indices = base.clone();
         let mut levels = vec![ChainLevel { first_index: 0, index_count: base.len() as u32, error: 0.0 }];
+        let tri = |t: &[u32]| t.iter().map(|&v| positions[v as usize].map(f64::from)).collect::<Vec<_>>();
+        let triangles = |indices: &[u32]| -> Vec<[[f64; 3]; 3]> {
+            indices
+                .chunks_exact(3)
+                .map(|t| {
+                    let p = tri(t);
+                    [p[0], p[1], p[2]]
+                })
+                .collect()
+        };
+        let original = Surface::new(triangles(&base));
         let mut current = base;
         let mut error = 0.0f32;
         while current.len() / 3 >= min_triangles.max(2) && levels.len() < 20 {
             let target = (current.len() / 2 / 3 * 3).max(3);
-            let mut relative = 0.0f32;
-            let next =
-                meshopt::simplify(&current, &adapter, target, 1.0, meshopt::SimplifyOptions::None, Some(&mut relative));
+            let next = meshopt::simplify(&current, &adapter, target, 1.0, meshopt::SimplifyOptions::None, None);
             if next.is_empty() || next.len() * 10 > current.len() * 9 {
                 break;
             }
-            // meshopt's error is relative to the mesh extent, measured from the previous level:
-            // accumulate, so that each level's error covers the way from the original.
-            error = error.max(0.0) + relative * scale;
+            // Measured against the original, every sample (rounded up to f32), monotone.
+            let measured = two_sided_with(&triangles(&next), &original, usize::MAX).max;
+            let rounded = measured as f32;
+            let rounded = if (rounded as f64) < measured { rounded.next_up() } else { rounded };
+            error = error.max(rounded);
             levels.push(ChainLevel { first_index: indices.len() as u32, index_count: next.len() as u32, error });
             indices.extend_from_slice(&next);
             current = next;
