@@ -58,6 +58,7 @@ fn box_dag(n: i32, open: bool) -> Dag {
                 uvs: vec![],
                 indices,
                 materials: vec![],
+                open_edges: vec![],
             });
         }
     }
@@ -75,6 +76,7 @@ fn box_dag(n: i32, open: bool) -> Dag {
         uvs: vec![],
         indices,
         materials: vec![],
+        open_edges: vec![],
     });
     let step = 2.0 / n as f32;
     let sphere = |r: f32| Sphere { center: [0.0; 3], radius: r };
