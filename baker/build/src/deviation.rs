@@ -17,7 +17,7 @@
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Simplified};
 use crate::weld::WeldedMesh;
-use mres_geom::bvh::{point_triangle_distance2, Bvh, Triangle};
+use mres_geom::bvh::{Bvh, Triangle};
 use mres_geom::edges::edge_key;
 use mres_geom::parts::{diagonals, UnionFind};
 
@@ -86,16 +86,17 @@ pub fn simplify_measured(
     locked: impl Fn(u32) -> bool,
     settings: &BakeSettings,
     part_size: &[f32],
-) -> Option<(Simplified, f32)> {
+) -> Option<Measured> {
     let (members, triangles, errors) = (reference.members_error, &reference.triangles[..], &reference.errors);
     let small = SMALL_TRIANGLE * members as f64;
     let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.samples.as_deref(), small };
     let error_of = |s: &Simplified, hot_above: Option<f64>| {
-        let (total, hot) = measure(mesh, &sides, &s.indices, part_size, s.error as f64, hot_above, reference.original);
-        (stored(total, s.error).max(members), hot)
+        let (total, hot, found) =
+            measure(mesh, &sides, &s.indices, part_size, s.error as f64, hot_above, reference.original);
+        (stored(total, s.error).max(members), hot, found)
     };
     let mut best = simplify_group(mesh, input, masks, &locked, settings)?;
-    let (mut error, _) = error_of(&best, None);
+    let (mut error, _, mut found) = error_of(&best, None);
     let mut extra: Vec<u32> = Vec::new();
     for _ in 0..OUTLIER_RETRIES {
         let (estimate, added) = (best.error as f64, error as f64 - members as f64);
@@ -104,7 +105,7 @@ pub fn simplify_measured(
         }
         // Lock around the samples farther than half the excess (and than the outlier ratio).
         let hot_above = (added * 0.5 / SAMPLING_MARGIN).max(OUTLIER_RATIO * estimate);
-        let (_, hot) = error_of(&best, Some(hot_above));
+        let (_, hot, _) = error_of(&best, Some(hot_above));
         let before = extra.len();
         extra.extend(hot);
         extra.sort_unstable();
@@ -115,13 +116,24 @@ pub fn simplify_measured(
         let id = |v: u32| mesh.position_ids[v as usize];
         let lock = |v: u32| locked(v) || extra.binary_search(&id(v)).is_ok();
         let Some(retry) = simplify_group(mesh, input, masks, lock, settings) else { break };
-        let (e, _) = error_of(&retry, None);
+        let (e, _, f) = error_of(&retry, None);
         if e >= error {
             break;
         }
-        (best, error) = (retry, e);
+        (best, error, found) = (retry, e, f);
     }
-    Some((best, error))
+    Some(Measured { simplified: best, error, found })
+}
+
+/// What [`simplify_measured`] returns.
+pub struct Measured {
+    /// The simplified group.
+    pub simplified: Simplified,
+    /// Its stored error.
+    pub error: f32,
+    /// Per reference sample, the output triangle within `error` of it that measuring found
+    /// (`NOT_FOUND` where not measured), for [`assign_owned`].
+    pub found: Vec<u32>,
 }
 
 /// A level-0 triangle (welded vertex ids) and the bits of its samples a cluster stands for:
@@ -152,41 +164,53 @@ fn sample_point(t: &Triangle<f32>, b: usize) -> [f32; 3] {
     }
 }
 
-/// Hands each level-0 sample of `owned` to a cluster of `children` (a group's output, whose
-/// stored error is `error`) within `error` of it, the one near the triangle's centroid when
-/// that is close enough: the next level measures the sample against that cluster's group.
-/// A sample must go to a cluster near itself, not just near its triangle: where a group border
-/// later runs between two clusters, a level-0 triangle can straddle it, and its far corner
-/// would be measured across the border. Every sample stays under exactly one pending cluster.
-pub fn assign_owned(mesh: &WeldedMesh, owned: &[Owned], children: &[Vec<u32>], error: f32) -> Vec<Vec<Owned>> {
+/// Hands each level-0 sample of `owned` (the group's reference, in order) to a cluster of
+/// `children` (the split of `output`, the group's result, whose stored error is `error`) within
+/// `error` of it: the one holding the output triangle measuring found for it (`found`, see
+/// [`Measured`]), else one found by a search. The next level measures the sample against that
+/// cluster's group. A sample must go to a cluster near itself, not just near its triangle:
+/// where a group border later runs between two clusters, a level-0 triangle can straddle it, and
+/// its far corner would be measured across the border. Every sample stays under exactly one
+/// pending cluster.
+pub fn assign_owned(
+    mesh: &WeldedMesh,
+    owned: &[Owned],
+    (output, found): (&[u32], &[u32]),
+    children: &[Vec<u32>],
+    error: f32,
+) -> Vec<Vec<Owned>> {
     let point = |v: u32| mesh.positions[v as usize];
-    let tris: Vec<Triangle<f32>> =
-        children.iter().flat_map(|c| c.chunks_exact(3).map(|t| [point(t[0]), point(t[1]), point(t[2])])).collect();
-    let child_of: Vec<usize> =
-        children.iter().enumerate().flat_map(|(i, c)| std::iter::repeat_n(i, c.len() / 3)).collect();
-    let bvh = Bvh::new(&tris);
+    let key = |t: &[u32]| {
+        let mut k = [t[0], t[1], t[2]];
+        k.sort_unstable();
+        k
+    };
+    let mut child_of: rustc_hash::FxHashMap<[u32; 3], u32> = rustc_hash::FxHashMap::default();
+    for (i, c) in children.iter().enumerate() {
+        for t in c.chunks_exact(3) {
+            child_of.insert(key(t), i as u32);
+        }
+    }
+    let output_child: Vec<u32> = output.chunks_exact(3).map(|t| child_of.get(&key(t)).copied().unwrap_or(0)).collect();
+    let tris: Vec<Triangle<f32>> = output.chunks_exact(3).map(|t| [point(t[0]), point(t[1]), point(t[2])]).collect();
+    let mut bvh: Option<Bvh<f32>> = None;
     let close2 = error * error;
     let mut out = vec![Vec::new(); children.len()];
-    let mut hint = usize::MAX;
     let mut bits = vec![0u8; children.len()];
-    for &(t, mask) in owned {
-        let tri = t.map(point);
-        // Any cluster within a quarter of the error will do for the centroid (the nearest
-        // would be tighter by little, and an exact search costs a full descent).
-        let (_, near) = bvh.nearest_squared(&tris, sample_point(&tri, 6), close2 / 16.0, hint);
-        hint = near;
+    let mut hint = usize::MAX;
+    for (i, &(t, mask)) in owned.iter().enumerate() {
         let mut touched: Vec<usize> = Vec::new();
-        // A small triangle goes whole to the centroid's cluster: each of its points is within
-        // a quarter of the error plus its radius of that cluster.
-        let whole = radius(&tri) <= error * 0.5;
         for b in (0..7).filter(|b| mask >> b & 1 != 0) {
-            let p = sample_point(&tri, b);
-            let nearest = if whole || point_triangle_distance2(p, &tris[near]) <= close2 {
-                near
+            let f = found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
+            let nearest = if f != NOT_FOUND {
+                f as usize
             } else {
-                bvh.nearest_squared(&tris, p, close2, near).1
+                // Not measured (it lies on the output too): the output triangle at it.
+                let bvh = bvh.get_or_insert_with(|| Bvh::new(&tris));
+                bvh.nearest_squared(&tris, sample_point(&t.map(point), b), close2 / 16.0, hint).1
             };
-            let c = child_of[nearest];
+            hint = nearest;
+            let c = output_child[nearest] as usize;
             if bits[c] == 0 {
                 touched.push(c);
             }
@@ -212,7 +236,7 @@ pub fn group_error(
 ) -> f32 {
     let errors = vec![members_error; input.len() / 3];
     let sides = Sides { input, triangle_errors: &errors, owned: None, small: 0.0 };
-    let (total, _) = measure(mesh, &sides, output, part_size, simplifier_error as f64, None, None);
+    let (total, _, _) = measure(mesh, &sides, output, part_size, simplifier_error as f64, None, None);
     stored(total, simplifier_error).max(members_error)
 }
 
@@ -305,8 +329,11 @@ fn measure(
     floor: f64,
     hot_above: Option<f64>,
     original: Option<&Original>,
-) -> (f64, Vec<u32>) {
+) -> (f64, Vec<u32>, Vec<u32>) {
     let (input, triangle_errors) = (sides.input, sides.triangle_errors);
+    // Per input sample (7 per triangle), the output triangle its query stopped at: within the
+    // returned error of it (see `assign_owned`); NOT_FOUND where the sample was not measured.
+    let mut found = vec![NOT_FOUND; input.len() / 3 * 7];
     let id = |v: u32| mesh.position_ids[v as usize];
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for &v in input {
@@ -407,14 +434,21 @@ fn measure(
     let mut hint = usize::MAX;
     for pass in [0b000_0111u8, 0b111_1000] {
         let triangles = input.chunks_exact(3).zip(&input_tris).zip(&input_duty).zip(triangle_errors).zip(&reach_of);
-        for ((((t, tri), &duty), &e), &r) in triangles {
+        for (i, ((((t, tri), &duty), &e), &r)) in triangles.enumerate() {
             let e = e + r;
             // A point farther than its part's size counts as that: the part vanished.
             let size = part_size[id(t[0]) as usize];
-            for p in samples(*tri, duty & pass) {
+            for b in (0..7).filter(|b| (duty & pass) >> b & 1 != 0) {
+                let p = sample_point(tri, b);
                 let enough = enough2(worst, e as f64);
                 let (d2, nearest) = output_bvh.nearest_squared(&output_tris, p, enough, hint);
                 hint = nearest;
+                if r > 0.0 {
+                    // Measured at the centroid for the whole triangle.
+                    found[7 * i..7 * i + 7].fill(nearest as u32);
+                } else {
+                    found[7 * i + b] = nearest as u32;
+                }
                 let d2 = d2.min(size * size);
                 if d2 > enough {
                     worst = worst.max(total(d2, e as f64));
@@ -440,8 +474,11 @@ fn measure(
         hot.sort_unstable();
         hot.dedup();
     }
-    (worst, hot)
+    (worst, hot, found)
 }
+
+/// `measure`'s mark for a sample it did not measure.
+const NOT_FOUND: u32 = u32::MAX;
 
 /// Which samples each triangle of `input` and of `output` measures, as bits: corner k (bit k;
 /// input only: the corners the output dropped), the midpoint of edge k from corner k (bit 3 + k)

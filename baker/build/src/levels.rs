@@ -220,7 +220,7 @@ impl<'a> Builder<'a> {
                     ErrorBound::Measured => merge_owned(members().flat_map(|m| m.owned.iter().copied())),
                     ErrorBound::Simplifier => Vec::new(),
                 };
-                let (s, error) = match settings.error_bound {
+                let (s, error, found) = match settings.error_bound {
                     ErrorBound::Measured => {
                         let reference = if owned.is_empty() {
                             // Against the members, each with its own error (a later shard stage).
@@ -241,12 +241,13 @@ impl<'a> Builder<'a> {
                             let original = self.original.as_ref();
                             Reference { triangles: Cow::Owned(triangles), errors, samples, members_error, original }
                         };
-                        simplify_measured(mesh, &merged, &masks, &reference, locked, settings, part_size)?
+                        let m = simplify_measured(mesh, &merged, &masks, &reference, locked, settings, part_size)?;
+                        (m.simplified, m.error, m.found)
                     }
                     ErrorBound::Simplifier => {
                         let s = simplify_group(mesh, &merged, &masks, locked, settings)?;
                         let error = s.error;
-                        (s, error)
+                        (s, error, Vec::new())
                     }
                 };
                 let indices = split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings);
@@ -254,7 +255,7 @@ impl<'a> Builder<'a> {
                 let owned = if owned.is_empty() {
                     vec![Vec::new(); indices.len()]
                 } else {
-                    assign_owned(mesh, &owned, &indices, error)
+                    assign_owned(mesh, &owned, (&s.indices, &found), &indices, error)
                 };
                 let children = indices
                     .into_iter()
