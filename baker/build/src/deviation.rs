@@ -554,6 +554,22 @@ fn duties(
     let corner = |s: u32| ((s / 3) as usize, 1u8 << (s % 3));
     let edge = |s: u32| ((s / 3) as usize, 8u8 << (s % 3));
     let whole = |t: u32| (t as usize, 64u8);
+    if every_slot {
+        // Level-0 samples against an upper level: they share hardly an edge or a triangle, so
+        // only the corners the output kept are left out (a shared edge's midpoint measures 0
+        // at once), and the level-0 edges need no sort.
+        let mut kept = vec![false; mesh.position_count];
+        for &v in output {
+            kept[id(v) as usize] = true;
+        }
+        let input_duty = input
+            .chunks_exact(3)
+            .map(|t| (0..3).filter(|&k| kept[id(t[k]) as usize]).fold(0x7fu8, |d, k| d & !(1 << k)))
+            .collect();
+        let mut output_duty = vec![64u8; output.len() / 3];
+        mark(&edges(output), &[], &mut output_duty, (|_: u32| 0.0, false), edge);
+        return (input_duty, output_duty);
+    }
     let (input_edges, output_edges) = (edges(input), edges(output));
     let (input_keys, output_keys) = (triangles(input), triangles(output));
     let mut input_duty = vec![0u8; input.len() / 3];
