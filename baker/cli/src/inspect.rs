@@ -53,6 +53,9 @@ pub struct Cut {
     pub error: f32,
     /// Triangles drawn.
     pub triangles: u64,
+    /// Surface area of the cut over the level-0 area: how much of the model's extent (and,
+    /// for randomly oriented foliage cards, of its projected area) survives.
+    pub area_fraction: f64,
 }
 
 /// Everything `mres inspect` prints.
@@ -112,16 +115,24 @@ pub struct Summary {
     pub cut_triangles_at_extent_fraction: Vec<(f32, u64)>,
 }
 
+/// The bounds of the level-0 positions and each cluster's surface area.
+type Scan = ([f32; 3], [f32; 3], Vec<f64>);
+
 /// Reads every page of `file` (checksum and decompression) and decodes every cluster, and
-/// returns the bounds of the level-0 positions; any damage is an error.
-fn verify_and_bound(file: &MresFile) -> Result<([f32; 3], [f32; 3]), MresError> {
+/// returns the bounds of the level-0 positions and each cluster's area; any damage is an
+/// error.
+fn verify_and_bound(file: &MresFile) -> Result<Scan, MresError> {
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     let mut decoded = 0usize;
+    let mut areas = vec![0.0f64; file.clusters.len()];
     for (p, page) in file.pages.iter().enumerate() {
         let raw = file.page(p as u32)?;
         for c in page.first_cluster..page.first_cluster.saturating_add(page.cluster_count) {
             let cluster = file.decode_cluster(&raw, c)?;
             decoded += 1;
+            if let Some(a) = areas.get_mut(c as usize) {
+                *a = area(file, &cluster);
+            }
             if file.clusters[c as usize].own_group != NO_GROUP {
                 continue;
             }
@@ -141,9 +152,32 @@ fn verify_and_bound(file: &MresFile) -> Result<([f32; 3], [f32; 3]), MresError> 
         )));
     }
     if lo[0] > hi[0] {
-        return Ok(([0.0; 3], [0.0; 3]));
+        return Ok(([0.0; 3], [0.0; 3], areas));
     }
-    Ok((lo, hi))
+    Ok((lo, hi, areas))
+}
+
+/// Surface area of a decoded cluster, object units.
+fn area(file: &MresFile, cluster: &mres_format::DecodedCluster) -> f64 {
+    let p: Vec<[f64; 3]> = cluster.positions.iter().map(|q| file.header.grid.decode(*q).map(f64::from)).collect();
+    cluster
+        .indices
+        .chunks_exact(3)
+        .map(|t| {
+            let (a, b, c) = (p[t[0] as usize], p[t[1] as usize], p[t[2] as usize]);
+            let (u, v) = ([0, 1, 2].map(|k| b[k] - a[k]), [0, 1, 2].map(|k| c[k] - a[k]));
+            let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+            0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+        })
+        .sum()
+}
+
+/// Area of the uniform cut at `error` over the level-0 area.
+fn cut_area_fraction(file: &MresFile, areas: &[f64], error: f32) -> f64 {
+    let level0: f64 =
+        (0..file.clusters.len()).filter(|&c| file.clusters[c].own_group == NO_GROUP).map(|c| areas[c]).sum();
+    let cut = select::uniform_cut(&file.groups, &file.clusters, error);
+    cut.iter().map(|&c| areas[c as usize]).sum::<f64>() / level0.max(f64::MIN_POSITIVE)
 }
 
 fn cut_triangles(file: &MresFile, error: f32) -> u64 {
@@ -185,7 +219,7 @@ fn per_level(file: &MresFile, diagonal: f32) -> Vec<Level> {
 
 /// Reads and verifies all of `file` and summarises it.
 pub fn summarize(file: &MresFile) -> Result<Summary, MresError> {
-    let (lo, hi) = verify_and_bound(file)?;
+    let (lo, hi, areas) = verify_and_bound(file)?;
     let h = &file.header;
     let diagonal = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f32>().sqrt();
     let level0 = level0_triangles(file);
@@ -225,6 +259,7 @@ pub fn summarize(file: &MresFile) -> Result<Summary, MresError> {
                 fraction_of_diagonal: f,
                 error: f * diagonal,
                 triangles: cut_triangles(file, f * diagonal),
+                area_fraction: cut_area_fraction(file, &areas, f * diagonal),
             })
             .collect(),
         cut_triangles_at_extent_fraction: CUT_FRACTIONS.iter().map(|&f| (f, cut_triangles(file, f * extent))).collect(),
@@ -352,16 +387,18 @@ impl Summary {
 
     fn render_cuts(&self, s: &mut String) {
         let _ = writeln!(s, "\ntriangles per uniform cut (`mres export --error E`):");
-        let _ = writeln!(s, "{:>12} {:>12} {:>12} {:>8}", "E / diagonal", "E (object)", "triangles", "of lvl 0");
+        let header = ["E / diagonal", "E (object)", "triangles", "of lvl 0", "area"];
+        let _ = writeln!(s, "{:>12} {:>12} {:>12} {:>8} {:>8}", header[0], header[1], header[2], header[3], header[4]);
         for c in &self.uniform_cuts {
             let share = c.triangles as f64 / self.level0_triangles.max(1) as f64 * 100.0;
             let _ = writeln!(
                 s,
-                "{:>12} {:>12} {:>12} {:>7.1}%",
+                "{:>12} {:>12} {:>12} {:>7.1}% {:>7.1}%",
                 sig(c.fraction_of_diagonal as f64),
                 sig(c.error as f64),
                 count(c.triangles),
-                share
+                share,
+                c.area_fraction * 100.0
             );
         }
     }
