@@ -71,6 +71,8 @@ pub struct Reference<'a> {
     /// With `triangles` the level-0 triangles under the group: the whole original surface,
     /// which output samples are measured against.
     pub original: Option<&'a Original>,
+    /// Passed to `simplify_group`.
+    pub lenient: bool,
 }
 
 /// Simplifies a group (`simplify_group` on `input` with open-border `masks`) and measures its
@@ -95,7 +97,7 @@ pub fn simplify_measured(
             measure(mesh, &sides, &s.indices, part_size, s.error as f64, hot_above, reference.original);
         (stored(total, s.error).max(members), hot, found)
     };
-    let mut best = simplify_group(mesh, input, masks, &locked, settings)?;
+    let mut best = simplify_group(mesh, input, masks, &locked, settings, reference.lenient)?;
     let (mut error, _, mut found) = error_of(&best, None);
     let mut extra: Vec<u32> = Vec::new();
     for _ in 0..OUTLIER_RETRIES {
@@ -115,7 +117,7 @@ pub fn simplify_measured(
         }
         let id = |v: u32| mesh.position_ids[v as usize];
         let lock = |v: u32| locked(v) || extra.binary_search(&id(v)).is_ok();
-        let Some(retry) = simplify_group(mesh, input, masks, lock, settings) else { break };
+        let Some(retry) = simplify_group(mesh, input, masks, lock, settings, reference.lenient) else { break };
         let (e, _, f) = error_of(&retry, None);
         if e >= error {
             break;

@@ -207,6 +207,7 @@ impl<'a> Builder<'a> {
             owner[p] == u32::MAX - 1 || always_locked[p] & (CELL_BORDER | lock) != 0
         };
         let part_size = &self.part_size;
+        let lenient = lock == 0;
         let clusters = &self.clusters;
         let pending = &self.pending;
         parts
@@ -232,6 +233,7 @@ impl<'a> Builder<'a> {
                                 samples: None,
                                 members_error,
                                 original: None,
+                                lenient,
                             }
                         } else {
                             // Against the original surface under the group: nothing adds up.
@@ -239,13 +241,20 @@ impl<'a> Builder<'a> {
                             let samples = Some(owned.iter().map(|o| o.1).collect());
                             let triangles: Vec<u32> = owned.iter().flat_map(|o| o.0).collect();
                             let original = self.original.as_ref();
-                            Reference { triangles: Cow::Owned(triangles), errors, samples, members_error, original }
+                            Reference {
+                                triangles: Cow::Owned(triangles),
+                                errors,
+                                samples,
+                                members_error,
+                                original,
+                                lenient,
+                            }
                         };
                         let m = simplify_measured(mesh, &merged, &masks, &reference, locked, settings, part_size)?;
                         (m.simplified, m.error, m.found)
                     }
                     ErrorBound::Simplifier => {
-                        let s = simplify_group(mesh, &merged, &masks, locked, settings)?;
+                        let s = simplify_group(mesh, &merged, &masks, locked, settings, lenient)?;
                         let error = s.error;
                         (s, error, Vec::new())
                     }

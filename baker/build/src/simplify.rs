@@ -54,12 +54,17 @@ const REPAIR_ATTEMPTS: usize = 4;
 /// triangle) with every vertex for which `locked` is true kept in place; open borders are
 /// simplified along themselves. `None` when no simplifier gets below the stuck ratio with the
 /// group's border intact and no new hole.
+///
+/// With `lenient` (every group of the level was stuck), an output edge used an odd number of
+/// times may join any positions away from the group border: it becomes a marked open edge,
+/// and the measured error accounts for any hole.
 pub fn simplify_group(
     mesh: &WeldedMesh,
     indices: &[u32],
     masks: &[u8],
     locked: impl Fn(u32) -> bool,
     settings: &BakeSettings,
+    lenient: bool,
 ) -> Option<Simplified> {
     // Compact the group's vertices so that each group works on a small, local vertex array.
     let mut vertices: Vec<u32> = indices.to_vec();
@@ -80,7 +85,10 @@ pub fn simplify_group(
         attributes: &attributes,
         weights: &weights,
         limit: (triangles as f32 * settings.stuck_ratio) as usize,
-        border: EdgeCounts::new(mesh, indices, masks, &locked_positions(mesh, &vertices, &locked)),
+        border: EdgeCounts {
+            lenient,
+            ..EdgeCounts::new(mesh, indices, masks, &locked_positions(mesh, &vertices, &locked))
+        },
     };
     for method in [Method::Regular, Method::Permissive, Method::Prune, Method::Sloppy] {
         if method == Method::Permissive && weights.is_empty() {
@@ -201,6 +209,8 @@ struct EdgeCounts {
     /// Positions on a marked input edge, sorted: the only ones an open output edge may join
     /// (the simplifier moves open-border vertices along the border, never opens a hole).
     open: Vec<u32>,
+    /// Any position may be joined by an open output edge (see [`simplify_group`]).
+    lenient: bool,
 }
 
 fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
@@ -230,12 +240,12 @@ impl EdgeCounts {
         let mut open: Vec<u32> = marked.iter().flat_map(|&e| ends(e)).collect();
         open.sort_unstable();
         open.dedup();
-        EdgeCounts { border, locked: locked.to_vec(), open }
+        EdgeCounts { border, locked: locked.to_vec(), open, lenient: false }
     }
 
-    /// True when the group shares no edge or position with anything else.
+    /// True when the group shares no edge or position with anything else (or is lenient).
     fn isolated(&self) -> bool {
-        self.border.is_empty() && self.locked.is_empty()
+        self.lenient || (self.border.is_empty() && self.locked.is_empty())
     }
 
     /// The output's edges that need a mark (sorted) if `out` uses every border edge as often
