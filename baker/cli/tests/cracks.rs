@@ -15,20 +15,7 @@ fn terrain_dag() -> Dag {
     let bytes = bake(generate::terrain(40), &BakeSettings::default(), &|_| {}).expect("bake").bytes;
     let file = MresFile::parse(bytes).expect("parses");
     let decoded = file.decode_all().expect("decodes");
-    let clusters = decoded
-        .into_iter()
-        .zip(&file.clusters)
-        .map(|(d, info)| DagCluster {
-            group: info.group,
-            own_group: info.own_group,
-            positions: d.positions,
-            normals: d.normals,
-            uvs: d.uvs,
-            indices: d.indices,
-            materials: d.materials,
-            open_edges: d.open_edges,
-        })
-        .collect();
+    let clusters = decoded.into_iter().zip(&file.clusters).map(|(d, info)| DagCluster::from_decoded(d, info)).collect();
     Dag { header: file.header, groups: file.groups.clone(), clusters }
 }
 

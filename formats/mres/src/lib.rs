@@ -288,6 +288,23 @@ pub struct DagCluster {
     pub open_edges: Vec<u8>,
 }
 
+impl DagCluster {
+    /// The writer's form of a cluster read back from a file (decoded data and its hierarchy
+    /// record): writing it again gives the same bytes.
+    pub fn from_decoded(d: DecodedCluster, info: &ClusterInfo) -> DagCluster {
+        DagCluster {
+            group: info.group,
+            own_group: info.own_group,
+            positions: d.positions,
+            normals: d.normals,
+            uvs: d.uvs,
+            indices: d.indices,
+            materials: d.materials,
+            open_edges: d.open_edges,
+        }
+    }
+}
+
 impl Dag {
     /// A small valid DAG with every attribute: four level-0 clusters (a strip of quads) in one
     /// group, simplified into one root cluster. For examples and tests; its normals and UVs

@@ -34,20 +34,7 @@ fn round_trip_is_exact() {
     let again = Dag {
         header: file.header,
         groups: file.groups.clone(),
-        clusters: decoded
-            .into_iter()
-            .zip(&file.clusters)
-            .map(|(d, info)| DagCluster {
-                group: info.group,
-                own_group: info.own_group,
-                positions: d.positions,
-                normals: d.normals,
-                uvs: d.uvs,
-                indices: d.indices,
-                materials: d.materials,
-                open_edges: d.open_edges,
-            })
-            .collect(),
+        clusters: decoded.into_iter().zip(&file.clusters).map(|(d, info)| DagCluster::from_decoded(d, info)).collect(),
     };
     assert_eq!(write_mres(&again, 3).unwrap(), bytes);
 }
