@@ -18,6 +18,20 @@
 //! leaves ±1 too: both stay holes. A closed part that vanishes or slips is passed (sum 0):
 //! what that does to the image is the depth check's to judge, not the crack test's.
 //!
+//! A second way not to be a hole covers what the rays of the window miss: a slip at grazing
+//! incidence or an open rim that simplification moved. The drawn cut's own first crossing along
+//! the pixel centre's ray is a back face at P, and every full-detail crossing in front of P lies
+//! within the error τ allows (`τ · t / k` at distance t: an upper bound of the stored error of
+//! any selected cluster with a point there) of the drawn cut, and P within it of the full-detail
+//! surface. Errors are two-sided (docs/INVARIANTS.md §4), so every full-detail point lies that
+//! close to the cut: the surface that hides P at full detail is drawn, moved by no more than the
+//! error, only the ray passes it ([`ExposureTest::moved_within`]). Through a dropped cluster the
+//! full-detail crossings in front lie farther from the cut than the error; along the hole's rim,
+//! where they do not, the rim is a crack of the cut (an edge used an odd number of times
+//! unmarked, or marked twice: the validator's rule (c) of docs/INVARIANTS.md §1), and no crack
+//! may lie within the error of P or of those crossings. Holes, and gaps between levels that
+//! are narrower than the error, stay holes.
+//!
 //! The crossings are exact ray casts on the CPU in f64 (the candidates are few: none on a
 //! closed mesh that passes), over the full-detail triangles binned by screen tile per camera.
 //! Hand-written because the question (signed crossings of one ray through a given pixel) is
@@ -25,6 +39,8 @@
 //! acceleration structure the tiles already are.
 
 use crate::camera::Camera;
+use mres_geom::bvh::point_triangle_distance;
+use std::collections::HashMap;
 
 type V = [f64; 3];
 
@@ -56,6 +72,20 @@ pub struct ExposureTest {
     /// Triangle indices per tile; triangles reaching behind the eye are in `everywhere`.
     bins: Vec<Vec<u32>>,
     everywhere: Vec<u32>,
+    /// Cracks of a drawn cut ([`ExposureTest::with_cracks`]), binned the same way.
+    cracks: Vec<[V; 2]>,
+    crack_bins: Vec<Vec<u32>>,
+    cracks_everywhere: Vec<u32>,
+}
+
+/// Where a primitive's projection falls.
+enum Reach {
+    /// It reaches behind the eye: every tile.
+    Behind,
+    /// Outside the image.
+    Off,
+    /// These tiles.
+    Tiles(Box<dyn Iterator<Item = usize>>),
 }
 
 impl ExposureTest {
@@ -79,46 +109,85 @@ impl ExposureTest {
             triangles,
             bins: vec![Vec::new(); tiles_x * height.div_ceil(TILE)],
             everywhere: Vec::new(),
+            cracks: Vec::new(),
+            crack_bins: vec![Vec::new(); tiles_x * height.div_ceil(TILE)],
+            cracks_everywhere: Vec::new(),
         };
         test.bin();
         test
     }
 
     fn bin(&mut self) {
+        for i in 0..self.triangles.len() {
+            match self.reach(&self.triangles[i]) {
+                Reach::Behind => self.everywhere.push(i as u32),
+                Reach::Tiles(tiles) => tiles.for_each(|tile| self.bins[tile].push(i as u32)),
+                Reach::Off => {}
+            }
+        }
+    }
+
+    /// The tiles whose pixel centres the projection of `points`' bounding box may cover.
+    fn reach(&self, points: &[V]) -> Reach {
         let (w, h) = (self.width as f64, self.height as f64);
-        for (i, t) in self.triangles.iter().enumerate() {
-            let mut lo = [f64::INFINITY; 2];
-            let mut hi = [f64::NEG_INFINITY; 2];
-            let mut behind = false;
-            for p in t {
-                let d = sub(*p, self.eye);
-                let z = dot(d, self.basis[2]);
-                if z <= 0.0 {
-                    behind = true;
-                    break;
-                }
-                let px = (dot(d, self.basis[0]) / z / self.scale[0] + 1.0) * 0.5 * w;
-                let py = (1.0 - dot(d, self.basis[1]) / z / self.scale[1]) * 0.5 * h;
-                lo = [lo[0].min(px), lo[1].min(py)];
-                hi = [hi[0].max(px), hi[1].max(py)];
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for p in points {
+            let d = sub(*p, self.eye);
+            let z = dot(d, self.basis[2]);
+            if z <= 0.0 {
+                return Reach::Behind;
             }
-            if behind {
-                self.everywhere.push(i as u32);
-                continue;
-            }
-            // Pixel centres x + 0.5 inside [lo, hi], one pixel of slack for rounding.
-            if hi[0] < -1.0 || hi[1] < -1.0 || lo[0] > w + 1.0 || lo[1] > h + 1.0 {
-                continue;
-            }
-            let clamp = |v: f64, n: usize| (v.max(0.0) as usize).min(n - 1);
-            let (x0, x1) = (clamp(lo[0] - 1.0, self.width) / TILE, clamp(hi[0] + 1.0, self.width) / TILE);
-            let (y0, y1) = (clamp(lo[1] - 1.0, self.height) / TILE, clamp(hi[1] + 1.0, self.height) / TILE);
-            for ty in y0..=y1 {
-                for tx in x0..=x1 {
-                    self.bins[ty * self.tiles_x + tx].push(i as u32);
+            let px = (dot(d, self.basis[0]) / z / self.scale[0] + 1.0) * 0.5 * w;
+            let py = (1.0 - dot(d, self.basis[1]) / z / self.scale[1]) * 0.5 * h;
+            lo = [lo[0].min(px), lo[1].min(py)];
+            hi = [hi[0].max(px), hi[1].max(py)];
+        }
+        // Pixel centres x + 0.5 inside [lo, hi], one pixel of slack for rounding.
+        if hi[0] < -1.0 || hi[1] < -1.0 || lo[0] > w + 1.0 || lo[1] > h + 1.0 {
+            return Reach::Off;
+        }
+        let clamp = |v: f64, n: usize| (v.max(0.0) as usize).min(n - 1);
+        let (x0, x1) = (clamp(lo[0] - 1.0, self.width) / TILE, clamp(hi[0] + 1.0, self.width) / TILE);
+        let (y0, y1) = (clamp(lo[1] - 1.0, self.height) / TILE, clamp(hi[1] + 1.0, self.height) / TILE);
+        let tiles_x = self.tiles_x;
+        Reach::Tiles(Box::new((y0..=y1).flat_map(move |ty| (x0..=x1).map(move |tx| ty * tiles_x + tx))))
+    }
+
+    /// Adds the cut's cracks: the edges of these triangles (welded by position, as the grid
+    /// decodes them) used an odd number of times unmarked or marked more than once, the
+    /// validator's rule (c) of docs/INVARIANTS.md §1. `open` holds each triangle's open-edge
+    /// marks (bit k: the edge from corner k to corner k + 1). A crack near a pixel keeps
+    /// [`ExposureTest::moved_within`] from excusing it.
+    pub fn with_cracks(mut self, open: &[u8]) -> ExposureTest {
+        let key = |p: V| p.map(f64::to_bits);
+        // Per edge (its ends' bits, ordered): unmarked uses, marked uses, the segment.
+        type Uses = (u32, u32, [V; 2]);
+        let mut uses: HashMap<([u64; 3], [u64; 3]), Uses> = HashMap::new();
+        for (t, marks) in self.triangles.iter().zip(open.iter().chain(std::iter::repeat(&0))) {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                let (ka, kb) = (key(a), key(b));
+                let entry = uses.entry(if ka < kb { (ka, kb) } else { (kb, ka) }).or_insert((0, 0, [a, b]));
+                if marks >> k & 1 == 1 {
+                    entry.1 += 1;
+                } else {
+                    entry.0 += 1;
                 }
             }
         }
+        let mut cracks: Vec<[V; 2]> =
+            uses.into_values().filter(|(unmarked, marked, _)| unmarked % 2 == 1 || *marked > 1).map(|u| u.2).collect();
+        cracks.sort_by(|a, b| a.map(|p| p.map(f64::to_bits)).cmp(&b.map(|p| p.map(f64::to_bits))));
+        for (i, c) in cracks.iter().enumerate() {
+            match self.reach(c) {
+                Reach::Behind => self.cracks_everywhere.push(i as u32),
+                Reach::Tiles(tiles) => tiles.for_each(|tile| self.crack_bins[tile].push(i as u32)),
+                Reach::Off => {}
+            }
+        }
+        self.cracks = cracks;
+        self
     }
 
     /// The unit ray direction through the centre of pixel (x, y) and the factor from view depth
@@ -181,6 +250,77 @@ impl ExposureTest {
             })
         })
     }
+}
+
+impl ExposureTest {
+    /// Whether the back face that the drawn cut `cut` (binned for the same camera) shows at the
+    /// centre of pixel (x, y) is this full-detail surface moved within `error(t)` (the allowed
+    /// object-space error at distance t): the cut's first crossing there is a back face at P,
+    /// P lies within the error of these triangles, and so does the drawn cut of every crossing
+    /// of these triangles in front of P (module docs). Triangles are looked for in the tiles
+    /// within `radius` pixels (the error τ allows projects to τ pixels).
+    pub fn moved_within(
+        &self,
+        cut: &ExposureTest,
+        x: usize,
+        y: usize,
+        radius: usize,
+        error: impl Fn(f64) -> f64,
+    ) -> bool {
+        let Some(&(drawn, sign)) = cut.crossings(x, y).first() else { return false };
+        let p = self.along(x, y, drawn);
+        if sign > 0
+            || self.distance_near(p, x, y, radius) > error(drawn)
+            || cut.crack_near(p, x, y, radius, error(drawn))
+        {
+            return false;
+        }
+        self.crossings(x, y).into_iter().take_while(|c| c.0 < drawn).all(|(t, _)| {
+            let q = self.along(x, y, t);
+            cut.distance_near(q, x, y, radius) <= error(t) && !cut.crack_near(q, x, y, radius, error(t))
+        })
+    }
+
+    /// Whether a crack of the cut ([`ExposureTest::with_cracks`]) binned in the tiles within
+    /// `radius` pixels of (x, y) lies within `error` of `p`.
+    fn crack_near(&self, p: V, x: usize, y: usize, radius: usize, error: f64) -> bool {
+        self.near_tiles(x, y, radius)
+            .flat_map(|tile| &self.crack_bins[tile])
+            .chain(&self.cracks_everywhere)
+            .any(|&i| point_segment_distance(p, &self.cracks[i as usize]) <= error)
+    }
+
+    /// The tiles within `radius` pixels of (x, y).
+    fn near_tiles(&self, x: usize, y: usize, radius: usize) -> impl Iterator<Item = usize> + '_ {
+        let (tx0, tx1) = (x.saturating_sub(radius) / TILE, (x + radius).min(self.width - 1) / TILE);
+        let (ty0, ty1) = (y.saturating_sub(radius) / TILE, (y + radius).min(self.height - 1) / TILE);
+        (ty0..=ty1).flat_map(move |ty| (tx0..=tx1).map(move |tx| ty * self.tiles_x + tx))
+    }
+
+    /// The point at distance `t` along pixel (x, y)'s centre ray.
+    fn along(&self, x: usize, y: usize, t: f64) -> V {
+        let (d, _) = self.ray(x, y);
+        [0, 1, 2].map(|k| self.eye[k] + d[k] * t)
+    }
+
+    /// Distance from `p` to the nearest triangle binned in the tiles within `radius` pixels of
+    /// (x, y) or reaching behind the eye (infinite if none).
+    fn distance_near(&self, p: V, x: usize, y: usize, radius: usize) -> f64 {
+        self.near_tiles(x, y, radius)
+            .flat_map(|tile| &self.bins[tile])
+            .chain(&self.everywhere)
+            .map(|&i| point_triangle_distance(p, &self.triangles[i as usize]))
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
+/// Distance from `p` to the segment `s`.
+fn point_segment_distance(p: V, s: &[V; 2]) -> f64 {
+    let e = sub(s[1], s[0]);
+    let len2 = dot(e, e);
+    let f = if len2 > 0.0 { (dot(sub(p, s[0]), e) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let d = sub(p, [0, 1, 2].map(|k| s[0][k] + e[k] * f));
+    dot(d, d).sqrt()
 }
 
 /// Distance along the unit ray (o, d) to triangle t and +1 if it faces the ray's origin
@@ -255,6 +395,79 @@ mod tests {
         let mut t = square(1.0, 2.0, false);
         t.extend(square(-1.0, 2.0, false));
         assert!(!exposed_at(t, 6.0));
+    }
+
+    /// The two triangles of the rectangle [x0, x1] × [y0, y1] at `z`, facing +z if
+    /// `towards_plus`.
+    fn rect(x: [f64; 2], y: [f64; 2], z: f64, towards_plus: bool) -> Vec<[V; 3]> {
+        let (a, b, c, d) = ([x[0], y[0], z], [x[1], y[0], z], [x[1], y[1], z], [x[0], y[1], z]);
+        if towards_plus {
+            vec![[a, b, c], [a, c, d]]
+        } else {
+            vec![[a, c, b], [a, d, c]]
+        }
+    }
+
+    /// A one-sided wall seen from behind at z = −1, and in front of it a one-sided sheet facing
+    /// the eye at z = 1 whose open rim lies `gap` to the right of where pixel (8, 8)'s ray crosses
+    /// it, as (full detail with the sheet across the ray, cut with the sheet's rim moved by
+    /// `gap`): an open rim that simplification moved.
+    fn moved_rim(gap: f64) -> (ExposureTest, ExposureTest) {
+        let (d, _) = ExposureTest::new(&camera(), Vec::new()).ray(8, 8);
+        // Where the ray from the eye (0, 0, 5) crosses z = 1.
+        let h = [d[0] * (1.0 - 5.0) / d[2], d[1] * (1.0 - 5.0) / d[2]];
+        let ys = [h[1] - 0.5, h[1] + 0.5];
+        let mut full = square(-1.0, 2.0, false);
+        full.extend(rect([h[0] - 0.5, h[0] + 0.5], ys, 1.0, true));
+        let mut cut = square(-1.0, 2.0, false);
+        cut.extend(rect([h[0] + gap, h[0] + 0.5], ys, 1.0, true));
+        (ExposureTest::new(&camera(), full), ExposureTest::new(&camera(), cut))
+    }
+
+    #[test]
+    fn a_rim_moved_within_the_error_uncovers_no_hole() {
+        // The full detail encloses the wall's back face (the sheet in front, +1): the rays
+        // alone call it a hole.
+        let (full, cut) = moved_rim(0.02);
+        assert!(!full.exposed(8, 8, &[6.0], 1, |_| 0.05));
+        // The cut shows the wall there, the sheet moved by 0.02, within the error 0.05.
+        assert!(cut.first_back_depth(8, 8).is_some());
+        assert!(full.moved_within(&cut, 8, 8, 1, |_| 0.05));
+        // Moved by 0.2: beyond the error, a hole.
+        let (full, far) = moved_rim(0.2);
+        assert!(!full.moved_within(&far, 8, 8, 1, |_| 0.05));
+        // The same cut with the sheet's and the wall's outer edges marked open: still excused.
+        // Unmarked, the sheet's moved edge is a crack (a gap between two levels looks so).
+        let rims = [0b110, 0b011, 0b011, 0b110];
+        let (full, cut) = moved_rim(0.02);
+        assert!(full.moved_within(&cut.with_cracks(&rims), 8, 8, 1, |_| 0.05));
+        let (full, cut) = moved_rim(0.02);
+        assert!(!full.moved_within(&cut.with_cracks(&[0; 4]), 8, 8, 1, |_| 0.05));
+    }
+
+    #[test]
+    fn cracks_are_the_unmarked_odd_and_twice_marked_edges() {
+        // A square of two triangles: its 4 outer edges are used once, the diagonal twice.
+        let test = |open: &[u8]| ExposureTest::new(&camera(), square(0.0, 1.0, true)).with_cracks(open).cracks.len();
+        assert_eq!(test(&[0, 0]), 4);
+        // [a, b, c] and [a, c, d]: outer edges a-b, b-c (bits 0, 1) and c-d, d-a (bits 1, 2).
+        assert_eq!(test(&[0b011, 0b110]), 0);
+        assert_eq!(test(&[0b011, 0b010]), 1);
+        // The diagonal marked on both sides (bit 2 of the first, bit 0 of the second).
+        assert_eq!(test(&[0b111, 0b111]), 1);
+    }
+
+    #[test]
+    fn a_dropped_wall_is_not_moved_within_the_error() {
+        // A closed box seen from outside, drawn without its near wall: the far wall's back face
+        // shows, and the full detail's near wall is nowhere near the drawn cut.
+        let mut full = square(1.0, 2.0, true);
+        full.extend(square(-1.0, 2.0, false));
+        let full = ExposureTest::new(&camera(), full);
+        let cut = ExposureTest::new(&camera(), square(-1.0, 2.0, false));
+        assert!(!full.moved_within(&cut, 8, 8, 1, |_| 0.05));
+        // With the near wall drawn, the pixel shows a front face: nothing to excuse.
+        assert!(!full.moved_within(&full, 8, 8, 1, |_| 0.05));
     }
 
     #[test]

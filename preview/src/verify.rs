@@ -9,7 +9,8 @@
 //!    is drawn with back faces in pure red. A red pixel within the depth tolerance of 3. is a
 //!    fold within the error (or the full-detail surface itself seen from behind); one beyond
 //!    it is a hole (or a T-junction) unless the full-detail surface is seen from behind there,
-//!    unenclosed: open geometry, judged by [`crate::exposed`].
+//!    unenclosed, or what hides it at full detail is drawn within the error and the ray only
+//!    passes it: open geometry and grazing slips, judged by [`crate::exposed`].
 //! 3. **Depth.** The same renders' depth against the τ = 0 render (full detail) of the camera:
 //!    a cluster drawn at threshold τ has `projected(own) ≤ τ`, so its stored object-space error
 //!    is at most `τ · dist / k` (k = H/2 · proj11, `dist` ≥ the distance of any of its points:
@@ -449,7 +450,7 @@ impl CrackRender<'_> {
         let camera = self.camera;
         if exposure.is_none() {
             let set = view_cut(&file.groups, &file.clusters, &camera.view_params(), 0.0);
-            *exposure = Some(ExposureTest::new(camera, triangles(file, decoded, &set)?));
+            *exposure = Some(ExposureTest::new(camera, triangles(file, decoded, &set)?.0));
         }
         let full = exposure.as_ref().context("exposure test")?;
         // At an edge-on triangle the rasterizer's depth can lie far off the triangle (its
@@ -460,17 +461,22 @@ impl CrackRender<'_> {
         if options.crack_flags & FLAG_DROP_SOME != 0 {
             set.retain(|c| c % 5 != 0);
         }
-        let cut = ExposureTest::new(camera, triangles(file, decoded, &set)?);
+        let (drawn, open) = triangles(file, decoded, &set)?;
+        let cut = ExposureTest::new(camera, drawn).with_cracks(&open);
         let k = camera.height as f64 * 0.5 * camera.proj_y as f64;
         let (factor, tau) = (options.depth_error_factor as f64, self.tau as f64);
         let tolerance = |t: f64| factor * (tau * t / k + t * 1e-5);
+        // The error τ allows at distance t (with the grid's slack), 1×: compared in 3D, exactly.
+        let error = |t: f64| tau * t / k + t * 1e-5;
         let (w, radius) = (camera.width as usize, self.tau.ceil() as usize + 1);
         let (mut holes, mut first) = (0, None);
         for &i in &candidates {
             let (x, y) = (i % w, i / w);
             let mut depths = neighbour_depths(self.depth, x, y, w, camera.z_near);
             depths.extend(cut.first_back_depth(x, y));
-            if !full.exposed(x, y, &depths, radius, tolerance) {
+            // Or the surface in front moved within the error, only the ray passes it (a slip
+            // at grazing incidence, an open rim that simplification moved): crate::exposed.
+            if !full.exposed(x, y, &depths, radius, tolerance) && !full.moved_within(&cut, x, y, radius, error) {
                 holes += 1;
                 first.get_or_insert([x as u32, y as u32]);
             }
@@ -479,24 +485,33 @@ impl CrackRender<'_> {
     }
 }
 
-/// The triangles of the clusters `set`, object space; decodes the file's clusters on first use.
-fn triangles(file: &MresFile, decoded: &mut Option<Vec<DecodedCluster>>, set: &[u32]) -> Result<Vec<[[f64; 3]; 3]>> {
+/// A triangle in object space.
+type Triangle = [[f64; 3]; 3];
+
+/// The triangles of the clusters `set`, object space, and their open-edge marks (one byte per
+/// triangle, as in the file); decodes the file's clusters on first use.
+fn triangles(
+    file: &MresFile,
+    decoded: &mut Option<Vec<DecodedCluster>>,
+    set: &[u32],
+) -> Result<(Vec<Triangle>, Vec<u8>)> {
     if decoded.is_none() {
         *decoded = Some(file.decode_all()?);
     }
     let clusters = decoded.as_ref().context("decoded clusters")?;
     let grid = file.header.grid;
-    let mut out = Vec::new();
+    let (mut out, mut open) = (Vec::new(), Vec::new());
     for &c in set {
         let cluster = clusters.get(c as usize).context("cluster index")?;
         let at = |i: u8| cluster.positions.get(i as usize).map(|q| grid.decode(*q).map(f64::from));
-        for t in cluster.indices.chunks_exact(3) {
+        for (k, t) in cluster.indices.chunks_exact(3).enumerate() {
             if let (Some(a), Some(b), Some(c)) = (at(t[0]), at(t[1]), at(t[2])) {
                 out.push([a, b, c]);
+                open.push(cluster.open_edges.get(k).copied().unwrap_or(0));
             }
         }
     }
-    Ok(out)
+    Ok((out, open))
 }
 
 /// View depths of pixel (x, y) and its 8 neighbours where they are not background, from a
