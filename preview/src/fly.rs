@@ -25,7 +25,7 @@ pub struct Movement {
     pub right: f32,
     /// World up (E or Space +, Q or Ctrl −).
     pub up: f32,
-    /// Shift: [`FAST_FACTOR`] times faster.
+    /// Shift: `FAST_FACTOR` times faster.
     pub fast: bool,
 }
 
@@ -36,7 +36,7 @@ pub struct FlyCamera {
     pub position: [f32; 3],
     /// Turn about +y, radians.
     pub yaw: f32,
-    /// Elevation, radians, within ±[`MAX_PITCH`].
+    /// Elevation, radians, within ±`MAX_PITCH`.
     pub pitch: f32,
     /// The model's bounds: they set the speed and the near plane.
     pub bounds: Sphere,
