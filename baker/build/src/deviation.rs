@@ -380,16 +380,9 @@ fn measure(
         hot2.map_or(d * d, |h| h.min(d * d))
     };
     let mut hot = Vec::new();
-    let mid = |a: [f32; 3], b: [f32; 3]| [0, 1, 2].map(|k| (a[k] + b[k]) * 0.5);
-    let centroid = |t: &Triangle<f32>| [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) * (1.0 / 3.0));
     // Samples of a triangle by its duty bits: corners, edge midpoints, centroid.
-    let samples = |tri: Triangle<f32>, duty: u8| {
-        (0..7).filter(move |b| duty >> b & 1 != 0).map(move |b| match b {
-            0..=2 => tri[b],
-            3..=5 => mid(tri[b - 3], tri[(b - 2) % 3]),
-            _ => centroid(&tri),
-        })
-    };
+    let samples =
+        |tri: Triangle<f32>, duty: u8| (0..7).filter(move |b| duty >> b & 1 != 0).map(move |b| sample_point(&tri, b));
     let total = |d2: f32, e: f64| e + SAMPLING_MARGIN * ((d2 as f64).sqrt() + slack);
 
     // Output → input: the nearest input triangle's member error (any member's, until found
@@ -489,14 +482,14 @@ const NOT_FOUND: u32 = u32::MAX;
 /// share is measured by one of them only: the first of those with the largest member error
 /// (`triangle_errors`, per input triangle).
 ///
-/// With `every_slot`, input samples that several triangles share are marked on all of them
-/// (the caller then keeps only the samples each triangle owns).
+/// With `level0_samples` (the input is level-0 triangles whose samples the caller keeps only
+/// where owned), every input sample is measured but the corners the output kept; see below.
 fn duties(
     mesh: &WeldedMesh,
     input: &[u32],
     output: &[u32],
     triangle_errors: &[f32],
-    every_slot: bool,
+    level0_samples: bool,
 ) -> (Vec<u8>, Vec<u8>) {
     let id = |v: u32| mesh.position_ids[v as usize];
     // (key, slot = 3 × triangle + corner), sorted: equal keys are adjacent, first slot first.
@@ -531,7 +524,7 @@ fn duties(
         a: &[(K, u32)],
         b: &[(K, u32)],
         duty: &mut [u8],
-        (rank, every): (impl Fn(u32) -> f32, bool),
+        rank: impl Fn(u32) -> f32,
         bit: impl Fn(u32) -> (usize, u8),
     ) {
         let mut j = 0;
@@ -540,13 +533,6 @@ fn duties(
                 j += 1;
             }
             if j >= b.len() || b[j].0 != run[0].0 {
-                if every {
-                    for x in run {
-                        let (t, m) = bit(x.1);
-                        duty[t] |= m;
-                    }
-                    continue;
-                }
                 let slot = run.iter().map(|x| x.1).fold(run[0].1, |s, x| if rank(x) > rank(s) { x } else { s });
                 let (t, m) = bit(slot);
                 duty[t] |= m;
@@ -556,7 +542,7 @@ fn duties(
     let corner = |s: u32| ((s / 3) as usize, 1u8 << (s % 3));
     let edge = |s: u32| ((s / 3) as usize, 8u8 << (s % 3));
     let whole = |t: u32| (t as usize, 64u8);
-    if every_slot {
+    if level0_samples {
         // Level-0 samples against an upper level: they share hardly an edge or a triangle, so
         // only the corners the output kept are left out (a shared edge's midpoint measures 0
         // at once), and the level-0 edges need no sort.
@@ -569,7 +555,7 @@ fn duties(
             .map(|t| (0..3).filter(|&k| kept[id(t[k]) as usize]).fold(0x7fu8, |d, k| d & !(1 << k)))
             .collect();
         let mut output_duty = vec![64u8; output.len() / 3];
-        mark(&edges(output), &[], &mut output_duty, (|_: u32| 0.0, false), edge);
+        mark(&edges(output), &[], &mut output_duty, |_| 0.0, edge);
         return (input_duty, output_duty);
     }
     let (input_edges, output_edges) = (edges(input), edges(output));
@@ -579,12 +565,11 @@ fn duties(
     let by_slot = |s: u32| triangle_errors[s as usize / 3];
     let by_triangle = |t: u32| triangle_errors[t as usize];
     let none = |_: u32| 0.0;
-    let all = every_slot;
-    mark(&corners(input), &corners(output), &mut input_duty, (by_slot, all), corner);
-    mark(&input_edges, &output_edges, &mut input_duty, (by_slot, all), edge);
-    mark(&input_keys, &output_keys, &mut input_duty, (by_triangle, all), whole);
-    mark(&output_edges, &input_edges, &mut output_duty, (none, false), edge);
-    mark(&output_keys, &input_keys, &mut output_duty, (none, false), whole);
+    mark(&corners(input), &corners(output), &mut input_duty, by_slot, corner);
+    mark(&input_edges, &output_edges, &mut input_duty, by_slot, edge);
+    mark(&input_keys, &output_keys, &mut input_duty, by_triangle, whole);
+    mark(&output_edges, &input_edges, &mut output_duty, none, edge);
+    mark(&output_keys, &input_keys, &mut output_duty, none, whole);
     (input_duty, output_duty)
 }
 

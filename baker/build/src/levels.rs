@@ -420,7 +420,7 @@ fn always_locked(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<u8> {
     marked.par_sort_unstable();
     let mut locked = vec![0u8; mesh.position_count];
     for run in edges.chunk_by(|a, b| a == b) {
-        let marks = marked.partition_point(|&m| m <= run[0]) - marked.partition_point(|&m| m < run[0]);
+        let marks = open::count(&marked, run[0]);
         let why =
             if (run.len() - marks) % 2 == 1 { CELL_BORDER } else { 0 } | if run.len() >= 3 { NON_MANIFOLD } else { 0 };
         locked[(run[0] >> 32) as usize] |= why;

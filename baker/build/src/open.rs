@@ -63,6 +63,11 @@ pub fn marked_edges(mesh: &WeldedMesh, indices: &[u32], masks: &[u8]) -> Vec<u64
     out
 }
 
+/// How often `e` occurs in the sorted `edges` (as [`marked_edges`] returns them).
+pub fn count(edges: &[u64], e: u64) -> usize {
+    edges.partition_point(|&m| m <= e) - edges.partition_point(|&m| m < e)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -227,7 +227,7 @@ impl EdgeCounts {
     fn new(mesh: &WeldedMesh, indices: &[u32], masks: &[u8], locked: &[u32]) -> EdgeCounts {
         let keys = edge_keys(mesh, indices);
         let marked = open::marked_edges(mesh, indices, masks);
-        let marks = |e: u64| marked.partition_point(|&m| m <= e) - marked.partition_point(|&m| m < e);
+        let marks = |e: u64| open::count(&marked, e);
         let is_locked = |p: u32| locked.binary_search(&p).is_ok();
         let border = keys
             .chunk_by(|a, b| a == b)
