@@ -56,25 +56,10 @@ fn soup(file: &MresFile, decoded: &[DecodedCluster], clusters: impl Iterator<Ite
     s
 }
 
-/// Deterministic sample points: every triangle's centroid and edge midpoints, thinned to at
-/// most `max` points (triangle order, even stride).
+/// The validator's sample points on a soup (`distance::samples`: centroids and edge midpoints,
+/// thinned), each with its cluster and triangle.
 fn samples(s: &Soup, max: usize) -> Vec<([f64; 3], u32, usize)> {
-    let stride = (s.tris.len() * 4).div_ceil(max.max(1)).max(1);
-    let mut out = Vec::new();
-    for (i, t) in s.tris.iter().enumerate() {
-        let mid = |a: [f64; 3], b: [f64; 3]| [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0, (a[2] + b[2]) / 2.0];
-        let c = [
-            (t[0][0] + t[1][0] + t[2][0]) / 3.0,
-            (t[0][1] + t[1][1] + t[2][1]) / 3.0,
-            (t[0][2] + t[1][2] + t[2][2]) / 3.0,
-        ];
-        for (k, p) in [c, mid(t[0], t[1]), mid(t[1], t[2]), mid(t[2], t[0])].into_iter().enumerate() {
-            if (i * 4 + k) % stride == 0 {
-                out.push((p, s.cluster[i], i));
-            }
-        }
-    }
-    out
+    crate::distance::samples(&s.tris, max).into_iter().map(|(p, i)| (p, s.cluster[i], i)).collect()
 }
 
 /// Measures honesty on `cuts` uniform cuts with about `samples_per_cut` points each way.
