@@ -20,6 +20,7 @@ use crate::weld::WeldedMesh;
 use mres_geom::bvh::{Bvh, Triangle};
 use mres_geom::edges::edge_key;
 use mres_geom::parts::{diagonals, UnionFind};
+use rayon::prelude::*;
 
 /// The sampled distance is scaled by this before it is added: the samples (vertices, edge
 /// midpoints, centroids) miss the largest distance between them, and the next level's samples
@@ -138,20 +139,23 @@ pub struct Measured {
     pub found: Vec<u32>,
 }
 
-/// A level-0 triangle (welded vertex ids) and the bits of its samples a cluster stands for:
-/// corner k (bit k), the midpoint of edge k from corner k (bit 3 + k), the centroid (bit 6).
-pub type Owned = ([u32; 3], u8);
+/// A level-0 triangle and the bits of its samples a cluster stands for: the Morton code of its
+/// centroid over the mesh (the sort key, so that a group's samples come in spatial order:
+/// queries then start near their answer, and runs of them form patches), its welded vertex
+/// ids, and the bits: corner k (bit k), the midpoint of edge k from corner k (bit 3 + k), the
+/// centroid (bit 6).
+pub type Owned = (u32, [u32; 3], u8);
 
 /// The level-0 samples of a group's members, one entry per triangle (bits of one triangle
-/// owned by several members are joined), sorted.
+/// owned by several members are joined), sorted (so in Morton order).
 pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
     let mut all: Vec<Owned> = owned.collect();
     all.sort_unstable();
     let mut out: Vec<Owned> = Vec::with_capacity(all.len());
-    for (t, bits) in all {
+    for (code, t, bits) in all {
         match out.last_mut() {
-            Some(last) if last.0 == t => last.1 |= bits,
-            _ => out.push((t, bits)),
+            Some(last) if last.1 == t => last.2 |= bits,
+            _ => out.push((code, t, bits)),
         }
     }
     out
@@ -200,7 +204,7 @@ pub fn assign_owned(
     let mut out = vec![Vec::new(); children.len()];
     let mut bits = vec![0u8; children.len()];
     let mut hint = usize::MAX;
-    for (i, &(t, mask)) in owned.iter().enumerate() {
+    for (i, &(code, t, mask)) in owned.iter().enumerate() {
         let mut touched: Vec<usize> = Vec::new();
         for b in (0..7).filter(|b| mask >> b & 1 != 0) {
             let f = found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
@@ -219,7 +223,7 @@ pub fn assign_owned(
             bits[c] |= 1 << b;
         }
         for c in touched {
-            out[c].push((t, std::mem::take(&mut bits[c])));
+            out[c].push((code, t, std::mem::take(&mut bits[c])));
         }
     }
     out
@@ -370,20 +374,14 @@ fn measure(
         }
     }
 
-    let hot2 = hot_above.map(|h| (h * h) as f32);
+    let limits = Limits { slack, hot2: hot_above.map(|h| (h * h) as f32) };
+    let hot2 = limits.hot2;
     let largest = triangle_errors.iter().copied().fold(0.0f32, f32::max) as f64;
     let mut worst = floor;
-    // The squared distance below which a sample with member error `e` cannot raise `worst`
-    // (nor is hot): the query may stop at any triangle within it.
-    let enough2 = |worst: f64, e: f64| {
-        let d = ((worst - e) / SAMPLING_MARGIN - slack).max(0.0) as f32;
-        hot2.map_or(d * d, |h| h.min(d * d))
-    };
     let mut hot = Vec::new();
     // Samples of a triangle by its duty bits: corners, edge midpoints, centroid.
     let samples =
         |tri: Triangle<f32>, duty: u8| (0..7).filter(move |b| duty >> b & 1 != 0).map(move |b| sample_point(&tri, b));
-    let total = |d2: f32, e: f64| e + SAMPLING_MARGIN * ((d2 as f64).sqrt() + slack);
 
     // Output → input: the nearest input triangle's member error (any member's, until found
     // exactly).
@@ -410,11 +408,11 @@ fn measure(
         let mut hint = usize::MAX;
         for ((t, tri), &duty) in output.chunks_exact(3).zip(&output_tris).zip(&output_duty) {
             for p in samples(*tri, duty) {
-                let enough = enough2(worst, largest);
+                let enough = limits.enough2(worst, largest);
                 let (d2, nearest) = input_bvh.nearest_squared(&input_tris, p, enough, hint);
                 hint = nearest;
                 if d2 > enough {
-                    worst = worst.max(total(d2, triangle_errors[nearest] as f64));
+                    worst = worst.max(limits.total(d2, triangle_errors[nearest] as f64));
                     if hot2.is_some_and(|h| d2 > h) {
                         hot.extend(input[nearest * 3..nearest * 3 + 3].iter().chain(t).map(|&v| id(v)));
                     }
@@ -423,36 +421,26 @@ fn measure(
         }
     }
 
-    // Input → output: the dropped vertices first (the farthest points, usually), so that the
-    // edge and centroid samples that follow mostly stop at the first triangle within the worst.
+    // Input → output, in runs measured in parallel (large groups are few, at the top levels).
     let output_bvh = Bvh::new(&output_tris);
-    let mut hint = usize::MAX;
-    for pass in [0b000_0111u8, 0b111_1000] {
-        let triangles = input.chunks_exact(3).zip(&input_tris).zip(&input_duty).zip(triangle_errors).zip(&reach_of);
-        for (i, ((((t, tri), &duty), &e), &r)) in triangles.enumerate() {
-            let e = e + r;
-            // A point farther than its part's size counts as that: the part vanished.
-            let size = part_size[id(t[0]) as usize];
-            for b in (0..7).filter(|b| (duty & pass) >> b & 1 != 0) {
-                let p = sample_point(tri, b);
-                let enough = enough2(worst, e as f64);
-                let (d2, nearest) = output_bvh.nearest_squared(&output_tris, p, enough, hint);
-                hint = nearest;
-                if r > 0.0 {
-                    // Measured at the centroid for the whole triangle.
-                    found[7 * i..7 * i + 7].fill(nearest as u32);
-                } else {
-                    found[7 * i + b] = nearest as u32;
-                }
-                let d2 = d2.min(size * size);
-                if d2 > enough {
-                    worst = worst.max(total(d2, e as f64));
-                    if hot2.is_some_and(|h| d2 > h) {
-                        hot.extend(t.iter().map(|&v| id(v)));
-                    }
-                }
-            }
-        }
+    if sides.owned.is_some() {
+        let output = (&output_bvh, &output_tris[..]);
+        let bound = |e: f32| limits.enough2(worst, e as f64).sqrt();
+        accept_patches(&input_tris, (&mut input_duty, &mut found), output, triangle_errors, bound);
+    }
+    let side =
+        InputSide { mesh, input, tris: &input_tris, duty: &input_duty, errors: triangle_errors, reach: &reach_of };
+    let runs: Vec<(f64, Vec<u32>)> = found
+        .par_chunks_mut(7 * RUN_TRIANGLES)
+        .enumerate()
+        .map(|(k, found)| {
+            let first = k * RUN_TRIANGLES;
+            side.measure(first, found, (&output_bvh, &output_tris), part_size, worst, limits)
+        })
+        .collect();
+    for (run_worst, run_hot) in runs {
+        worst = worst.max(run_worst);
+        hot.extend(run_hot);
     }
 
     // The neighbours of the hot positions too: what a collapse moved there came from them.
@@ -470,6 +458,183 @@ fn measure(
         hot.dedup();
     }
     (worst, hot, found)
+}
+
+/// Input triangles measured together in one parallel run of `InputSide::measure`. Fixed, so
+/// that the result does not depend on the thread count.
+const RUN_TRIANGLES: usize = 4096;
+
+/// When a sample's distance matters: the f32 rounding `slack` of a group's distances, and with
+/// outlier retries the squared distance above which a sample is hot.
+#[derive(Clone, Copy)]
+struct Limits {
+    slack: f64,
+    hot2: Option<f32>,
+}
+
+impl Limits {
+    /// The squared distance below which a sample with member error `e` cannot raise `worst`
+    /// (nor is hot): the query may stop at any triangle within it.
+    fn enough2(&self, worst: f64, e: f64) -> f32 {
+        let d = ((worst - e) / SAMPLING_MARGIN - self.slack).max(0.0) as f32;
+        self.hot2.map_or(d * d, |h| h.min(d * d))
+    }
+
+    /// A sample's bound: its distance (squared `d2`), rounded up, plus its member error `e`.
+    fn total(&self, d2: f32, e: f64) -> f64 {
+        e + SAMPLING_MARGIN * ((d2 as f64).sqrt() + self.slack)
+    }
+}
+
+/// The input side of a measurement, in the group's local coordinates.
+struct InputSide<'a> {
+    mesh: &'a WeldedMesh,
+    input: &'a [u32],
+    tris: &'a [Triangle<f32>],
+    duty: &'a [u8],
+    errors: &'a [f32],
+    /// Per triangle, the radius added where it is measured at its centroid only.
+    reach: &'a [f32],
+}
+
+impl InputSide<'_> {
+    /// Input → output for the triangles from `first` on whose `found` slots are given
+    /// (7 per triangle), starting from the bound `worst`: the dropped vertices first (the
+    /// farthest points, usually), so that the edge and centroid samples that follow mostly stop
+    /// at the first triangle within the worst. Returns the run's largest bound and its hot
+    /// positions, and fills `found` with the output triangle each query stopped at.
+    fn measure(
+        &self,
+        first: usize,
+        found: &mut [u32],
+        (bvh, output): (&Bvh<f32>, &[Triangle<f32>]),
+        part_size: &[f32],
+        mut worst: f64,
+        limits: Limits,
+    ) -> (f64, Vec<u32>) {
+        let id = |v: u32| self.mesh.position_ids[v as usize];
+        let mut hot = Vec::new();
+        let mut hint = usize::MAX;
+        for pass in [0b000_0111u8, 0b111_1000] {
+            for (j, slots) in found.chunks_exact_mut(7).enumerate() {
+                let i = first + j;
+                let (t, tri) = (&self.input[3 * i..3 * i + 3], &self.tris[i]);
+                let e = self.errors[i] + self.reach[i];
+                // A point farther than its part's size counts as that: the part vanished.
+                let size = part_size[id(t[0]) as usize];
+                for b in (0..7).filter(|b| (self.duty[i] & pass) >> b & 1 != 0) {
+                    let enough = limits.enough2(worst, e as f64);
+                    let (d2, nearest) = bvh.nearest_squared(output, sample_point(tri, b), enough, hint);
+                    hint = nearest;
+                    if self.reach[i] > 0.0 {
+                        // Measured at the centroid for the whole triangle.
+                        slots.fill(nearest as u32);
+                    } else {
+                        slots[b] = nearest as u32;
+                    }
+                    let d2 = d2.min(size * size);
+                    if d2 > enough {
+                        worst = worst.max(limits.total(d2, e as f64));
+                        if limits.hot2.is_some_and(|h| d2 > h) {
+                            hot.extend(t.iter().map(|&v| id(v)));
+                        }
+                    }
+                }
+            }
+        }
+        (worst, hot)
+    }
+}
+
+/// Input → output, a patch at a time: where a sphere around several input triangles lies so
+/// close to the output that no point in it can raise the error, one query at its centre
+/// settles all of their samples. Distance to a surface is 1-Lipschitz, so every point within
+/// `R` of the centre is within `d + R` of the output; a patch is settled when `d + R` is below
+/// `bound(e)` (the distance under which a sample of member error `e` cannot raise the current
+/// maximum). Its triangles' duties are cleared and their samples `found` at the triangle the
+/// centre's query stopped at, within the bound of each of them. Patches are runs of `input`
+/// (in Morton order, see [`Owned`]), halved until they settle or hold one triangle; what is left is
+/// measured sample by sample. At upper levels, whose errors dwarf the level-0 triangles, this
+/// replaces most of the three queries per level-0 triangle by one per patch.
+fn accept_patches(
+    input: &[Triangle<f32>],
+    (duty, found): (&mut [u8], &mut [u32]),
+    (bvh, output): (&Bvh<f32>, &[Triangle<f32>]),
+    triangle_errors: &[f32],
+    bound: impl Fn(f32) -> f32,
+) {
+    if input.is_empty() {
+        return;
+    }
+    let boxes = BoxPyramid::new(input, duty);
+    let mut hint = usize::MAX;
+    let mut stack = vec![(boxes.levels.len() - 1, 0)];
+    while let Some((level, k)) = stack.pop() {
+        let Some((center, radius)) = boxes.sphere(level, k) else { continue };
+        let run = k << level..((k + 1) << level).min(input.len());
+        let limit = bound(triangle_errors[run.clone()].iter().copied().fold(0.0, f32::max));
+        if radius < 0.5 * limit {
+            let enough = (limit - radius) * (limit - radius);
+            let (d2, nearest) = bvh.nearest_squared(output, center, enough, hint);
+            hint = nearest;
+            if d2 <= enough {
+                duty[run.clone()].fill(0);
+                found[7 * run.start..7 * run.end].fill(nearest as u32);
+                continue;
+            }
+        }
+        if level > 0 {
+            let children = [(level - 1, 2 * k + 1), (level - 1, 2 * k)];
+            stack.extend(children.into_iter().filter(|&(l, c)| c < boxes.levels[l].len()));
+        }
+    }
+}
+
+/// Bounding boxes of runs of triangles: level 0 one per triangle, level j + 1 the union of
+/// pairs of level j (runs of 2^j triangles), up to one box for all. Built in linear time, so
+/// that trying patches costs little where none settles.
+struct BoxPyramid {
+    levels: Vec<Vec<([f32; 3], [f32; 3])>>,
+}
+
+impl BoxPyramid {
+    /// The pyramid over `triangles`; those whose `duty` is 0 have nothing to measure and get
+    /// an empty box.
+    fn new(triangles: &[Triangle<f32>], duty: &[u8]) -> BoxPyramid {
+        let one = |(t, &d): (&Triangle<f32>, &u8)| {
+            if d == 0 {
+                return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+            }
+            let lo = [0, 1, 2].map(|k| t[0][k].min(t[1][k]).min(t[2][k]));
+            let hi = [0, 1, 2].map(|k| t[0][k].max(t[1][k]).max(t[2][k]));
+            (lo, hi)
+        };
+        let mut levels = vec![triangles.iter().zip(duty).map(one).collect::<Vec<_>>()];
+        while levels[levels.len() - 1].len() > 1 {
+            let union = |p: &[([f32; 3], [f32; 3])]| {
+                let (mut lo, mut hi) = p[0];
+                for b in &p[1..] {
+                    (lo, hi) = ([0, 1, 2].map(|k| lo[k].min(b.0[k])), [0, 1, 2].map(|k| hi[k].max(b.1[k])));
+                }
+                (lo, hi)
+            };
+            let next = levels[levels.len() - 1].chunks(2).map(union).collect();
+            levels.push(next);
+        }
+        BoxPyramid { levels }
+    }
+
+    /// The centre of box `k` of `level` and its half diagonal, padded for rounding (every
+    /// point of its triangles is within that of the centre); `None` for an empty box.
+    fn sphere(&self, level: usize, k: usize) -> Option<([f32; 3], f32)> {
+        let (lo, hi) = self.levels[level][k];
+        if lo[0] > hi[0] {
+            return None;
+        }
+        let c = [0, 1, 2].map(|k| lo[k] * 0.5 + hi[k] * 0.5);
+        let r2: f32 = (0..3).map(|k| (hi[k] - c[k]).max(c[k] - lo[k])).map(|d| d * d).sum();
+        Some((c, r2.sqrt() * (1.0 + 1e-5)))
+    }
 }
 
 /// `measure`'s mark for a sample it did not measure.

@@ -55,16 +55,27 @@ pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64]) -
     let clusters = level0_clusters(mesh, settings);
     let marks = open::mark(mesh, &clusters, open);
     let samples = first_samples(mesh, &clusters);
+    let codes = triangle_codes(mesh, &clusters);
     clusters
         .into_par_iter()
         .zip(marks)
-        .zip(samples)
-        .map(|((indices, open), samples)| {
+        .zip(samples.into_par_iter().zip(codes))
+        .map(|((indices, open), (samples, codes))| {
             let own_sphere = bounding_sphere(&indices, &mesh.positions);
-            let owned = indices.chunks_exact(3).zip(samples).map(|(t, bits)| ([t[0], t[1], t[2]], bits)).collect();
+            let owned = indices.chunks_exact(3).zip(samples).zip(codes);
+            let owned = owned.map(|((t, bits), code)| (code, [t[0], t[1], t[2]], bits)).collect();
             BuiltCluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP, open, owned }
         })
         .collect()
+}
+
+/// Per triangle of `clusters`, the Morton code of its centroid over the whole mesh.
+fn triangle_codes(mesh: &WeldedMesh, clusters: &[Vec<u32>]) -> Vec<Vec<u32>> {
+    let p = |v: u32| mesh.positions[v as usize];
+    let centroid = |t: &[u32]| [0, 1, 2].map(|k| (p(t[0])[k] + p(t[1])[k] + p(t[2])[k]) * (1.0 / 3.0));
+    let centroids: Vec<[f32; 3]> = clusters.iter().flat_map(|c| c.chunks_exact(3).map(centroid)).collect();
+    let mut codes = crate::partition::morton_codes(&centroids).into_iter();
+    clusters.iter().map(|c| codes.by_ref().take(c.len() / 3).collect()).collect()
 }
 
 /// Per triangle of `clusters`, the level-0 samples it owns (see `deviation::Owned`): its
@@ -238,8 +249,8 @@ impl<'a> Builder<'a> {
                         } else {
                             // Against the original surface under the group: nothing adds up.
                             let errors = vec![0.0; owned.len()];
-                            let samples = Some(owned.iter().map(|o| o.1).collect());
-                            let triangles: Vec<u32> = owned.iter().flat_map(|o| o.0).collect();
+                            let samples = Some(owned.iter().map(|o| o.2).collect());
+                            let triangles: Vec<u32> = owned.iter().flat_map(|o| o.1).collect();
                             let original = self.original.as_ref();
                             Reference {
                                 triangles: Cow::Owned(triangles),
