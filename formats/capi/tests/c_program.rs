@@ -107,11 +107,11 @@ fn c_program_streams_the_file_and_agrees_with_the_rust_reader() {
     // The file exercises the streaming: several pages, with dependencies between them.
     assert!(want["pages"].parse::<u32>().unwrap() >= 3, "{want:?}");
     assert!(want["dependencies"] != "0", "{want:?}");
-    assert_eq!(summary(&run(&exe, &bytes, "synthetic.mres")), want);
+    assert_eq!(summary(&run(exe, &bytes, "synthetic.mres")), want);
 
     // The sample DAG: one page, every attribute.
     let sample = mres_format::write_mres(&mres_format::Dag::sample(), 3).expect("writes");
-    assert_eq!(summary(&run(&exe, &sample, "sample.mres")), expected(&sample));
+    assert_eq!(summary(&run(exe, &sample, "sample.mres")), expected(&sample));
 }
 
 /// Runs the C program on `bytes` and returns the status name it failed with.
@@ -131,27 +131,27 @@ fn c_program_reports_damage_with_status_codes() {
     let prefix_len = index.pages[0].offset as usize;
 
     // The file ends inside the prefix: the C program's read comes up short.
-    assert_eq!(failure(&exe, &bytes[..prefix_len - 1], "short.mres"), "MRES_ERR_TRUNCATED");
+    assert_eq!(failure(exe, &bytes[..prefix_len - 1], "short.mres"), "MRES_ERR_TRUNCATED");
     // The file ends inside the fixed header.
-    assert_eq!(failure(&exe, &bytes[..HEADER_SIZE - 1], "tiny.mres"), "MRES_ERR_TRUNCATED");
+    assert_eq!(failure(exe, &bytes[..HEADER_SIZE - 1], "tiny.mres"), "MRES_ERR_TRUNCATED");
 
     // One flipped byte in page 1's compressed bytes.
     let mut flipped = bytes.clone();
     flipped[index.page_range(1).unwrap().start as usize + 5] ^= 0x40;
-    assert_eq!(failure(&exe, &flipped, "flipped.mres"), "MRES_ERR_CHECKSUM");
+    assert_eq!(failure(exe, &flipped, "flipped.mres"), "MRES_ERR_CHECKSUM");
 
     // One flipped byte in the hierarchy (the prefix's checksum covers it).
     let mut flipped = bytes.clone();
     flipped[HEADER_SIZE + 3] ^= 1;
-    assert_eq!(failure(&exe, &flipped, "hierarchy.mres"), "MRES_ERR_CHECKSUM");
+    assert_eq!(failure(exe, &flipped, "hierarchy.mres"), "MRES_ERR_CHECKSUM");
 
     // The file's last page cut short.
-    assert_eq!(failure(&exe, &bytes[..bytes.len() - 1], "cut.mres"), "MRES_ERR_PAGE_LENGTH");
+    assert_eq!(failure(exe, &bytes[..bytes.len() - 1], "cut.mres"), "MRES_ERR_PAGE_LENGTH");
 
     // A future version.
     let mut future = bytes.clone();
     future[4..8].copy_from_slice(&(mres_format::VERSION + 1).to_le_bytes());
-    assert_eq!(failure(&exe, &future, "future.mres"), "MRES_ERR_VERSION");
+    assert_eq!(failure(exe, &future, "future.mres"), "MRES_ERR_VERSION");
 }
 
 #[test]
