@@ -18,12 +18,12 @@ fn scratch() -> PathBuf {
     dir
 }
 
-/// The static library cargo built for this test run (`target/<profile>/libmres.a`).
+/// The static library cargo built for this test run. Cargo builds every crate type of the
+/// library for the integration tests, into `target/<profile>/deps/` beside the test binary;
+/// the copy one folder up is refreshed only by `cargo build`, so it may be stale.
 fn static_lib() -> PathBuf {
     let exe = std::env::current_exe().expect("test binary path");
-    // The test binary lies in target/<profile>/deps/.
-    let profile_dir = exe.parent().and_then(Path::parent).expect("target/<profile>");
-    let lib = profile_dir.join("libmres.a");
+    let lib = exe.parent().expect("target/<profile>/deps").join("libmres.a");
     assert!(lib.is_file(), "{} not found: cargo builds it with the test", lib.display());
     lib
 }
