@@ -5,6 +5,7 @@
 
 mod common;
 
+use mres_format::records::HeaderRecord;
 use mres_format::{uniform_cut, MresFile, HEADER_SIZE};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -150,7 +151,7 @@ fn c_program_reports_damage_with_status_codes() {
 
     // A future version.
     let mut future = bytes.clone();
-    future[4..8].copy_from_slice(&(mres_format::VERSION + 1).to_le_bytes());
+    future[HeaderRecord::VERSION..][..4].copy_from_slice(&(mres_format::VERSION + 1).to_le_bytes());
     assert_eq!(failure(exe, &future, "future.mres"), "MRES_ERR_VERSION");
 }
 

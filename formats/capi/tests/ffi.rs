@@ -4,6 +4,7 @@
 mod common;
 
 use mres::*;
+use mres_format::records::HeaderRecord;
 use mres_format::{MresIndex as RustIndex, HEADER_SIZE};
 use std::ffi::CStr;
 use std::ptr::{null, null_mut};
@@ -72,9 +73,9 @@ fn a_damaged_prefix_gives_its_status() {
         open(&bytes)
     };
     assert_eq!(damaged(0, b'X'), Err(MresStatus::MRES_ERR_BAD_MAGIC));
-    assert_eq!(damaged(4, 99), Err(MresStatus::MRES_ERR_VERSION));
+    assert_eq!(damaged(HeaderRecord::VERSION, 99), Err(MresStatus::MRES_ERR_VERSION));
     // header_size is checked before the checksum: a wrong one is a corrupt header.
-    assert_eq!(damaged(8, 161), Err(MresStatus::MRES_ERR_CORRUPT));
+    assert_eq!(damaged(HeaderRecord::HEADER_SIZE, 161), Err(MresStatus::MRES_ERR_CORRUPT));
     assert_eq!(damaged(prefix_len - 1, file[prefix_len - 1] ^ 1), Err(MresStatus::MRES_ERR_CHECKSUM));
     // SAFETY: checks the null output.
     assert_eq!(unsafe { mres_index_open(file.as_ptr(), prefix_len, null_mut()) }, MresStatus::MRES_ERR_ARG);
