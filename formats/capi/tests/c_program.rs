@@ -7,7 +7,7 @@ mod common;
 
 use mres_format::records::HeaderRecord;
 use mres_format::{uniform_cut, MresFile, HEADER_SIZE};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
@@ -19,18 +19,20 @@ fn scratch() -> PathBuf {
     dir
 }
 
-/// The static library cargo built for this test run. Cargo builds every crate type of the
-/// library for the integration tests, into `target/<profile>/deps/` beside the test binary;
-/// the copy one folder up is refreshed only by `cargo build`, so it may be stale.
-fn static_lib() -> PathBuf {
+/// A library cargo built for this test run (`libmres.a` or `libmres.so`). Cargo builds every
+/// crate type of the library for the integration tests, into `target/<profile>/deps/` beside
+/// the test binary; the copy one folder up is refreshed only by `cargo build`, so it may be
+/// stale.
+fn built_lib(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test binary path");
-    let lib = exe.parent().expect("target/<profile>/deps").join("libmres.a");
+    let lib = exe.parent().expect("target/<profile>/deps").join(name);
     assert!(lib.is_file(), "{} not found: cargo builds it with the test", lib.display());
     lib
 }
 
-/// Compiles `sources` (C, or C++ when `cxx`) into an executable linked with the static library.
-fn compile(name: &str, sources: &[PathBuf], cxx: bool) -> PathBuf {
+/// Compiles `sources` (C, or C++ when `cxx`) into an executable linked with `lib` (a path
+/// from [`built_lib`]).
+fn compile(name: &str, sources: &[PathBuf], cxx: bool, lib: &Path) -> PathBuf {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
     let exe = scratch().join(name);
     let compiler = match cxx {
@@ -38,14 +40,16 @@ fn compile(name: &str, sources: &[PathBuf], cxx: bool) -> PathBuf {
         false => std::env::var("CC").unwrap_or_else(|_| "cc".into()),
     };
     let standard = if cxx { "-std=c++17" } else { "-std=c11" };
+    let rpath = format!("-Wl,-rpath,{}", lib.parent().expect("the library's folder").display());
     let output = Command::new(&compiler)
         .args([standard, "-Wall", "-Wextra", "-Werror", "-pedantic", "-ffp-contract=off", "-O1"])
         .arg("-I")
         .arg(dir.join("include"))
         .args(sources)
-        .arg(static_lib())
-        // What the Rust standard library needs from the system when linked statically.
-        .args(["-lpthread", "-ldl", "-lm", "-o"])
+        .arg(lib)
+        // What the Rust standard library needs from the system when linked statically, and
+        // where the shared library is found at run time.
+        .args(["-lpthread", "-ldl", "-lm", &rpath, "-o"])
         .arg(&exe)
         .output()
         .unwrap_or_else(|e| panic!("running the C compiler `{compiler}`: {e}"));
@@ -53,10 +57,15 @@ fn compile(name: &str, sources: &[PathBuf], cxx: bool) -> PathBuf {
     exe
 }
 
-/// `tests/c/load.c`, compiled once for all tests (they run in parallel).
+fn load_c_source() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/c/load.c")
+}
+
+/// `tests/c/load.c` linked with the static library, compiled once for all tests (they run in
+/// parallel).
 fn load_c() -> &'static Path {
     static EXE: OnceLock<PathBuf> = OnceLock::new();
-    EXE.get_or_init(|| compile("load", &[Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/c/load.c")], false))
+    EXE.get_or_init(|| compile("load", &[load_c_source()], false, &built_lib("libmres.a")))
 }
 
 fn run(exe: &Path, file: &[u8], name: &str) -> Output {
@@ -170,7 +179,33 @@ fn header_compiles_as_cpp_and_links() {
          }\n",
     )
     .expect("writes the C++ source");
-    let exe = compile("header_check", &[source], true);
+    let exe = compile("header_check", &[source], true, &built_lib("libmres.a"));
     let status = Command::new(&exe).status().expect("runs the C++ program");
     assert_eq!(status.code(), Some(0));
+}
+
+#[test]
+fn shared_library_exports_the_header_functions_and_works() {
+    let so = built_lib("libmres.so");
+    let nm = Command::new("nm").args(["-D", "--defined-only"]).arg(&so).output().expect("runs nm");
+    assert!(nm.status.success(), "nm failed");
+    let exported: BTreeSet<String> = String::from_utf8_lossy(&nm.stdout)
+        .lines()
+        .filter_map(|line| line.split_whitespace().nth(2))
+        .map(str::to_string)
+        .collect();
+    let header = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("include/mres.h")).unwrap();
+    // Every identifier that stands before a `(` (declarations, and calls in the comments).
+    let declared: BTreeSet<String> = header
+        .split('(')
+        .filter_map(|before| before.rsplit(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).next())
+        .filter(|name| name.starts_with("mres_"))
+        .map(str::to_string)
+        .collect();
+    assert!(declared.len() >= 20, "{declared:?}");
+    assert_eq!(exported, declared, "the shared library exports exactly the header's functions");
+
+    let exe = compile("load_shared", &[load_c_source()], false, &so);
+    let sample = mres_format::write_mres(&mres_format::Dag::sample(), 3).expect("writes");
+    assert_eq!(summary(&run(&exe, &sample, "sample_shared.mres")), expected(&sample));
 }
