@@ -1,0 +1,292 @@
+//! The page handle: decoding a page from bytes the caller fetched, its GPU-layout bytes, and
+//! each cluster's decoded arrays copied into caller buffers.
+
+use crate::ffi::{call, copy_out, get, put, Failure, MresStatus, Outcome};
+use crate::index::MresIndex;
+use mres_format::{DecodedCluster, Grid, Page};
+
+/// One decoded page: its bytes in the GPU layout and its clusters decoded.
+///
+/// Opaque. Created by `mres_page_decode`, freed by `mres_page_free`. It owns all its data (it
+/// does not borrow the index or the input bytes) and is immutable: any number of threads may
+/// read one page at the same time.
+pub struct MresPage {
+    page: Page,
+    /// The file's position grid, to decode positions to floats.
+    grid: Grid,
+}
+
+impl MresPage {
+    /// Cluster `cluster` (a file-wide index) of this page.
+    fn cluster(&self, cluster: u32) -> Result<&DecodedCluster, Failure> {
+        let first = self.page.first_cluster;
+        cluster.checked_sub(first).and_then(|i| self.page.clusters.get(i as usize)).ok_or_else(|| {
+            let end = first as usize + self.page.clusters.len();
+            Failure::arg(format!("cluster {cluster} is not in page {} (clusters {first}..{end})", self.page.index))
+        })
+    }
+}
+
+/// Checks `len` bytes at `bytes` (the caller's fetch of `mres_page_range(index, page)`)
+/// against page `page`'s table entry (length, then BLAKE3 checksum), decompresses them and
+/// decodes and checks every cluster. On success stores a new page in `*out`; on failure
+/// stores null there (when `out` is not null).
+///
+/// Fails with `MRES_ERR_PAGE_LENGTH` when `len` is not the page's compressed size,
+/// `MRES_ERR_CHECKSUM` when the bytes are damaged, `MRES_ERR_CORRUPT` when they decode to
+/// something inconsistent. The library keeps no pointer into `bytes`.
+///
+/// # Safety
+/// `index` must be a live index; `bytes` must point to `len` readable bytes; `out` must be
+/// valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_decode(
+    index: *const MresIndex,
+    page: u32,
+    bytes: *const u8,
+    len: usize,
+    out: *mut *mut MresPage,
+) -> MresStatus {
+    if !out.is_null() {
+        // SAFETY: `out` is non-null and writable (the caller's contract).
+        unsafe { out.write(std::ptr::null_mut()) };
+    }
+    call("mres_page_decode", || {
+        // SAFETY: the caller's contract, as documented.
+        let (index, compressed) = unsafe { (&get(index, "index")?.inner, crate::ffi::bytes(bytes, len, "bytes")?) };
+        if out.is_null() {
+            return Err(Failure::arg("out is null"));
+        }
+        crate::index::item(&index.pages, page, "page")?;
+        let decoded = MresPage { page: index.decode_page(page, compressed)?, grid: index.header.grid };
+        // SAFETY: as above; the box is freed by `mres_page_free`.
+        unsafe { put(out, "out", Box::into_raw(Box::new(decoded))) }
+    })
+}
+
+/// Frees a page. Null is allowed (nothing happens). Pointers from `mres_page_bytes` dangle
+/// afterwards.
+///
+/// # Safety
+/// `page` must be null or a page from `mres_page_decode` not yet freed, that no other thread
+/// is using.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_free(page: *mut MresPage) {
+    if !page.is_null() {
+        // SAFETY: the caller's contract: the pointer came from `Box::into_raw` in
+        // `mres_page_decode` and is freed once.
+        drop(unsafe { Box::from_raw(page) });
+    }
+}
+
+/// The decompressed page in the GPU layout (docs/FORMAT.md §5: cluster headers, then the
+/// data blocks at the headers' offsets), to upload as is: stores a pointer to its first byte
+/// in `*data` and its length (the page's `raw_size`) in `*len`.
+///
+/// The bytes belong to the page: valid, unchanged, until `mres_page_free(page)`.
+///
+/// # Safety
+/// `page` must be a live page; `data` and `len` valid for writes.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_bytes(page: *const MresPage, data: *mut *const u8, len: *mut usize) -> MresStatus {
+    call("mres_page_bytes", || {
+        // SAFETY: the caller's contract, as documented.
+        let page = unsafe { get(page, "page")? };
+        let raw = &page.page.bytes;
+        // SAFETY: as above.
+        unsafe {
+            put(data, "data", raw.as_ptr())?;
+            put(len, "len", raw.len())
+        }
+    })
+}
+
+/// The page's clusters: file-wide indices `*first_cluster .. *first_cluster + *cluster_count`,
+/// the ones the per-cluster functions below accept for this page.
+///
+/// # Safety
+/// `page` must be a live page; `first_cluster` and `cluster_count` valid for writes.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_clusters(
+    page: *const MresPage,
+    first_cluster: *mut u32,
+    cluster_count: *mut u32,
+) -> MresStatus {
+    call("mres_page_clusters", || {
+        // SAFETY: the caller's contract, as documented.
+        let page = unsafe { &get(page, "page")?.page };
+        // SAFETY: as above.
+        unsafe {
+            put(first_cluster, "first_cluster", page.first_cluster)?;
+            put(cluster_count, "cluster_count", page.clusters.len() as u32)
+        }
+    })
+}
+
+/// Runs `f` on cluster `cluster` of `page` and copies the array it returns into the caller's
+/// buffer: the shared body of the per-cluster functions.
+///
+/// # Safety
+/// `page` a live page or null; `out`, `cap`, `count` as for [`copy_out`].
+unsafe fn cluster_array<T: Copy>(
+    name: &str,
+    page: *const MresPage,
+    cluster: u32,
+    (out, cap, count): (*mut T, usize, *mut usize),
+    f: impl FnOnce(&MresPage, &DecodedCluster) -> Vec<T>,
+) -> MresStatus {
+    call(name, || -> Outcome {
+        // SAFETY: the caller's contract.
+        let page = unsafe { get(page, "page")? };
+        let values = f(page, page.cluster(cluster)?);
+        // SAFETY: the caller's contract.
+        unsafe { copy_out(&values, out, cap, count) }
+    })
+}
+
+/// Copies cluster `cluster`'s vertex positions on the global grid, three `int32_t` per
+/// vertex (x, y, z), into `out`; stores the number of `int32_t` values in `*count`.
+///
+/// Every per-cluster function shares these rules: `cluster` is a file-wide index within
+/// `mres_page_clusters`; `cap` and `*count` count elements of the pointed-to type (here
+/// `int32_t`, not vertices); `out` null with `cap` 0 asks for the count alone; a `cap` below
+/// the count gives `MRES_ERR_BUFFER_TOO_SMALL` with `*count` set. No cluster needs more than
+/// 3 * 256 (positions, normals) or 3 * 128 (indices) elements.
+///
+/// # Safety
+/// `page` must be a live page; `out` valid for writes of `cap` elements (or null with `cap`
+/// 0); `count` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_cluster_positions(
+    page: *const MresPage,
+    cluster: u32,
+    out: *mut i32,
+    cap: usize,
+    count: *mut usize,
+) -> MresStatus {
+    // SAFETY: the caller's contract, as documented.
+    unsafe {
+        cluster_array("mres_page_cluster_positions", page, cluster, (out, cap, count), |_, c| {
+            c.positions.as_flattened().to_vec()
+        })
+    }
+}
+
+/// Copies cluster `cluster`'s vertex positions in object space, three floats per vertex,
+/// decoded from the grid by the exact f32 formula of docs/FORMAT.md §5.3 (so a vertex shared
+/// by two clusters decodes to the same bits). Rules as for `mres_page_cluster_positions`.
+///
+/// # Safety
+/// As for `mres_page_cluster_positions`.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_cluster_positions_f32(
+    page: *const MresPage,
+    cluster: u32,
+    out: *mut f32,
+    cap: usize,
+    count: *mut usize,
+) -> MresStatus {
+    // SAFETY: the caller's contract, as documented.
+    unsafe {
+        cluster_array("mres_page_cluster_positions_f32", page, cluster, (out, cap, count), |p, c| {
+            c.positions.iter().flat_map(|&q| p.grid.decode(q)).collect()
+        })
+    }
+}
+
+/// Copies cluster `cluster`'s triangle indices, three local vertex indices (`uint8_t`, below
+/// the vertex count) per triangle. Rules as for `mres_page_cluster_positions`.
+///
+/// # Safety
+/// As for `mres_page_cluster_positions`.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_cluster_indices(
+    page: *const MresPage,
+    cluster: u32,
+    out: *mut u8,
+    cap: usize,
+    count: *mut usize,
+) -> MresStatus {
+    // SAFETY: the caller's contract, as documented.
+    unsafe { cluster_array("mres_page_cluster_indices", page, cluster, (out, cap, count), |_, c| c.indices.clone()) }
+}
+
+/// Copies cluster `cluster`'s unit normals, three floats per vertex; none (count 0) when the
+/// file lacks `MRES_FLAG_NORMALS`. Rules as for `mres_page_cluster_positions`.
+///
+/// # Safety
+/// As for `mres_page_cluster_positions`.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_cluster_normals(
+    page: *const MresPage,
+    cluster: u32,
+    out: *mut f32,
+    cap: usize,
+    count: *mut usize,
+) -> MresStatus {
+    // SAFETY: the caller's contract, as documented.
+    unsafe {
+        cluster_array("mres_page_cluster_normals", page, cluster, (out, cap, count), |_, c| {
+            c.normals.as_flattened().to_vec()
+        })
+    }
+}
+
+/// Copies cluster `cluster`'s UVs, two floats (u, v) per vertex, decoded; none when the file
+/// lacks `MRES_FLAG_UVS`. Rules as for `mres_page_cluster_positions`.
+///
+/// # Safety
+/// As for `mres_page_cluster_positions`.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_cluster_uvs(
+    page: *const MresPage,
+    cluster: u32,
+    out: *mut f32,
+    cap: usize,
+    count: *mut usize,
+) -> MresStatus {
+    // SAFETY: the caller's contract, as documented.
+    unsafe {
+        cluster_array("mres_page_cluster_uvs", page, cluster, (out, cap, count), |_, c| c.uvs.as_flattened().to_vec())
+    }
+}
+
+/// Copies cluster `cluster`'s materials, one `uint16_t` per triangle; none when the file
+/// lacks `MRES_FLAG_MATERIALS`. Rules as for `mres_page_cluster_positions`.
+///
+/// # Safety
+/// As for `mres_page_cluster_positions`.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_cluster_materials(
+    page: *const MresPage,
+    cluster: u32,
+    out: *mut u16,
+    cap: usize,
+    count: *mut usize,
+) -> MresStatus {
+    // SAFETY: the caller's contract, as documented.
+    unsafe {
+        cluster_array("mres_page_cluster_materials", page, cluster, (out, cap, count), |_, c| c.materials.clone())
+    }
+}
+
+/// Copies cluster `cluster`'s open-edge marks, one `uint8_t` per triangle: bit k set when the
+/// edge from corner k to corner (k + 1) mod 3 lies on the cut's open border
+/// (docs/FORMAT.md §5.7); all zero when the cluster has no open edge. Rules as for
+/// `mres_page_cluster_positions`.
+///
+/// # Safety
+/// As for `mres_page_cluster_positions`.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_cluster_open_edges(
+    page: *const MresPage,
+    cluster: u32,
+    out: *mut u8,
+    cap: usize,
+    count: *mut usize,
+) -> MresStatus {
+    // SAFETY: the caller's contract, as documented.
+    unsafe {
+        cluster_array("mres_page_cluster_open_edges", page, cluster, (out, cap, count), |_, c| c.open_edges.clone())
+    }
+}
