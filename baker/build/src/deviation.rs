@@ -199,30 +199,40 @@ pub fn assign_owned(
     }
     let output_child: Vec<u32> = output.chunks_exact(3).map(|t| child_of.get(&key(t)).copied().unwrap_or(0)).collect();
     let tris: Vec<Triangle<f32>> = output.chunks_exact(3).map(|t| [point(t[0]), point(t[1]), point(t[2])]).collect();
+    // A corner the output kept was not measured: it goes with an output triangle using it.
+    let id = |v: u32| mesh.position_ids[v as usize];
+    let mut at_corner: rustc_hash::FxHashMap<u32, u32> = rustc_hash::FxHashMap::default();
+    for (s, &v) in output.iter().enumerate() {
+        at_corner.entry(id(v)).or_insert(s as u32 / 3);
+    }
     let mut bvh: Option<Bvh<f32>> = None;
     let close2 = error * error;
     let mut out = vec![Vec::new(); children.len()];
     let mut bits = vec![0u8; children.len()];
     let mut hint = usize::MAX;
     for (i, &(code, t, mask)) in owned.iter().enumerate() {
-        let mut touched: Vec<usize> = Vec::new();
+        let (mut touched, mut count) = ([0usize; 7], 0);
         for b in (0..7).filter(|b| mask >> b & 1 != 0) {
             let f = found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
-            let nearest = if f != NOT_FOUND {
-                f as usize
-            } else {
-                // Not measured (it lies on the output too): the output triangle at it.
-                let bvh = bvh.get_or_insert_with(|| Bvh::new(&tris));
-                bvh.nearest_squared(&tris, sample_point(&t.map(point), b), close2 / 16.0, hint).1
+            let kept = if b < 3 { at_corner.get(&id(t[b])) } else { None };
+            let nearest = match (f, kept) {
+                (NOT_FOUND, Some(&k)) => k as usize,
+                (NOT_FOUND, None) => {
+                    // Not measured and not a kept corner: the output triangle nearest to it.
+                    let bvh = bvh.get_or_insert_with(|| Bvh::new(&tris));
+                    bvh.nearest_squared(&tris, sample_point(&t.map(point), b), close2 / 16.0, hint).1
+                }
+                _ => f as usize,
             };
             hint = nearest;
             let c = output_child[nearest] as usize;
             if bits[c] == 0 {
-                touched.push(c);
+                touched[count] = c;
+                count += 1;
             }
             bits[c] |= 1 << b;
         }
-        for c in touched {
+        for &c in &touched[..count] {
             out[c].push((code, t, std::mem::take(&mut bits[c])));
         }
     }
