@@ -21,12 +21,12 @@ fn main() {
             frames.push(n);
             rest = &rest[n..];
         }
-        // Frames: preamble and indices, marks, the position planes, then two planes per
-        // attribute the file carries; the position planes are what is left.
+        // Frames: preamble, index lengths and coded indices, marks, the position planes, then
+        // two planes per attribute the file carries; the position planes are what is left.
         let attr = |flag: u32| if flags & flag != 0 { 2 } else { 0 };
         let tail = [attr(FLAG_NORMALS), attr(FLAG_UVS), attr(FLAG_MATERIALS)];
-        let planes = frames.len() - 2 - tail.iter().sum::<usize>();
-        let counts = [1, 1, planes, tail[0], tail[1], tail[2]];
+        let planes = frames.len() - 4 - tail.iter().sum::<usize>();
+        let counts = [3, 1, planes, tail[0], tail[1], tail[2]];
         let mut at = 0;
         for (size, count) in sizes.iter_mut().zip(counts) {
             *size += frames[at..at + count].iter().sum::<usize>();
