@@ -117,7 +117,9 @@ def prediction_order(tri, vc):
             out.append((c[k], pred))
         for k in range(3):
             pairs[frozenset((c[k], c[(k + 1) % 3]))] = c[(k + 2) % 3]
-    out += [(v, (out[-1][0],)) for v in range(vc) if v not in seen]
+    for v in range(vc):
+        if v not in seen:
+            out.append((v, (out[-1][0],)))
     return out
 
 
@@ -214,7 +216,9 @@ def encode_page(clusters, flags):
         coded += code
         marks += c["marks"]
         materials += c["materials"] or []
-        order = prediction_order(c["indices"], len(c["q"]))
+        # an index past the vertices (a test's corruption) predicts from the last one, as the
+        # checker reads it, so that the page decodes and the checker sees the bad index
+        order = prediction_order([min(i, len(c["q"]) - 1) for i in c["indices"]], len(c["q"]))
         for name, bits in (("q", 32), ("normals", 16), ("uvs", 16)):
             if c[name] is None:
                 continue

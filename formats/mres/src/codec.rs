@@ -138,11 +138,9 @@ fn predictors(indices: &[u8], vertex_count: usize, edges: &mut EdgeTable) -> Vec
             edges.insert(t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
         }
     }
-    for v in 0..vertex_count {
-        if !seen[v] {
-            let pred = previous(&out);
-            out.push((v as u8, pred));
-        }
+    for (v, _) in seen.iter().enumerate().take(vertex_count).filter(|(_, &s)| !s) {
+        let pred = previous(&out);
+        out.push((v as u8, pred));
     }
     out
 }
@@ -219,7 +217,13 @@ pub(crate) fn totals(records: &[ClusterInfo]) -> (usize, usize) {
 
 /// Length of a page's encoded bytes with `index_bytes` bytes of coded indices and `planes`
 /// position byte planes (FORMAT.md §4.3).
-pub(crate) fn encoded_len(flags: u32, clusters: usize, (v, t): (usize, usize), index_bytes: usize, planes: usize) -> usize {
+pub(crate) fn encoded_len(
+    flags: u32,
+    clusters: usize,
+    (v, t): (usize, usize),
+    index_bytes: usize,
+    planes: usize,
+) -> usize {
     let with = |flag: u32, n: usize| if flags & flag != 0 { n } else { 0 };
     PREAMBLE
         + 2 * clusters
@@ -436,8 +440,8 @@ fn decode_indices(coded: &[u8], vertex_count: usize, triangle_count: usize) -> R
     if coded.len() > index_bound(triangle_count) {
         return invalid(format!("{} bytes of coded indices for {triangle_count} triangles", coded.len()));
     }
-    let wide: Vec<u32> = meshopt::decode_index_buffer(coded, 3 * triangle_count)
-        .map_err(|e| Invalid(format!("index codec: {e}")))?;
+    let wide: Vec<u32> =
+        meshopt::decode_index_buffer(coded, 3 * triangle_count).map_err(|e| Invalid(format!("index codec: {e}")))?;
     if let Some(i) = wide.iter().find(|&&i| i as usize >= vertex_count) {
         return invalid(format!("local index {i} out of {vertex_count} vertices"));
     }
@@ -455,8 +459,9 @@ mod tests {
     /// A strip of `n` vertices with every attribute, including extreme values that wrap, in
     /// the form the writer stores (triangles as the index codec gives them back).
     fn sample(n: usize, seed: i32) -> Quantized {
-        let positions: Vec<[i32; 3]> =
-            (0..n as i32).map(|i| [i * 37 + seed, i32::MAX - i * i, if i % 5 == 0 { i32::MIN } else { i * 3 }]).collect();
+        let positions: Vec<[i32; 3]> = (0..n as i32)
+            .map(|i| [i * 37 + seed, i32::MAX - i * i, if i % 5 == 0 { i32::MIN } else { i * 3 }])
+            .collect();
         let mut indices = vec![0, 1, 2];
         for v in 3..n.min(130) as u8 {
             indices.extend_from_slice(&[v - 1, v - 2, v]);
@@ -488,8 +493,10 @@ mod tests {
         // A normal above the header's range is refused.
         assert!(decode_page(&bytes, &records(&clusters), flags, 9).is_err());
         // Without attributes, only positions, indices and marks are stored.
-        let bare: Vec<Quantized> =
-            clusters.iter().map(|c| Quantized { normals: vec![], uvs: vec![], materials: vec![], ..c.clone() }).collect();
+        let bare: Vec<Quantized> = clusters
+            .iter()
+            .map(|c| Quantized { normals: vec![], uvs: vec![], materials: vec![], ..c.clone() })
+            .collect();
         let bytes: Vec<u8> = encode_page(&bare, 0).unwrap().concat();
         assert_eq!(decode_page(&bytes, &records(&bare), 0, 0), Ok(bare.clone()));
         // One byte more or less is refused.

@@ -3,9 +3,9 @@
 
 use super::bits::{oct_decode, read_bits};
 use super::codec;
-use super::write::gpu_page;
 use super::error::{corrupt, section, MresError};
 use super::records::ClusterHeader;
+use super::write::gpu_page;
 use super::*;
 
 /// One page, checked and decompressed: its bytes in the GPU layout (FORMAT.md §5), uploaded as
@@ -68,7 +68,9 @@ pub(crate) fn decompress_page(
     // output: zstd fails rather than write more.
     let most = codec::max_encoded_len(header.flags, records);
     if most > MAX_PAGE_ENCODED_SIZE {
-        return Err(corrupt(format!("page {p}: its clusters could encode to {most} bytes (limit {MAX_PAGE_ENCODED_SIZE})")));
+        return Err(corrupt(format!(
+            "page {p}: its clusters could encode to {most} bytes (limit {MAX_PAGE_ENCODED_SIZE})"
+        )));
     }
     let encoded = zstd::bulk::decompress(compressed, most)
         .map_err(|e| MresError::Decompress { page: p, problem: e.to_string() })?;

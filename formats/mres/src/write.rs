@@ -480,7 +480,11 @@ impl EncodedCluster {
             .collect();
         let with = |flag: u32| flags & flag != 0;
         let pairs = |bytes: &[u8], n: usize| -> Vec<[u16; 2]> {
-            bytes.chunks_exact(4).take(n).map(|b| [u16::from_le_bytes([b[0], b[1]]), u16::from_le_bytes([b[2], b[3]])]).collect()
+            bytes
+                .chunks_exact(4)
+                .take(n)
+                .map(|b| [u16::from_le_bytes([b[0], b[1]]), u16::from_le_bytes([b[2], b[3]])])
+                .collect()
         };
         Quantized {
             positions: positions
@@ -498,7 +502,11 @@ impl EncodedCluster {
             uvs: if with(FLAG_UVS) { pairs(block(ClusterHeader::UVS), v) } else { Vec::new() },
             indices,
             materials: if with(FLAG_MATERIALS) {
-                block(ClusterHeader::MATERIALS).chunks_exact(2).take(t).map(|b| u16::from_le_bytes([b[0], b[1]])).collect()
+                block(ClusterHeader::MATERIALS)
+                    .chunks_exact(2)
+                    .take(t)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect()
             } else {
                 Vec::new()
             },
@@ -565,7 +573,11 @@ fn quantize(c: &DagCluster, h: &Header) -> Option<Quantized> {
         } else {
             Vec::new()
         },
-        uvs: if with(FLAG_UVS) { order.iter().map(|&o| h.uv.quantize(c.uvs[o as usize])).collect() } else { Vec::new() },
+        uvs: if with(FLAG_UVS) {
+            order.iter().map(|&o| h.uv.quantize(c.uvs[o as usize])).collect()
+        } else {
+            Vec::new()
+        },
         indices,
         materials: if with(FLAG_MATERIALS) { c.materials.clone() } else { Vec::new() },
         marks,
