@@ -644,7 +644,8 @@ fn pack_ranges<const N: usize>(values: impl Iterator<Item = [i64; N]> + Clone) -
         }
     }
     let bits: [u32; N] = std::array::from_fn(|k| bits_for((hi[k] - lo[k]) as u32));
-    let mut w = BitWriter::default();
+    let count = values.clone().count() as u64;
+    let mut w = BitWriter::with_capacity(count * bits.iter().map(|&b| b as u64).sum::<u64>());
     for v in values {
         for k in 0..N {
             w.push((v[k] - lo[k]) as u32, bits[k]);
