@@ -89,6 +89,10 @@ fn typed_errors() {
     let mut v = bytes.clone();
     v[4] = 1; // version 1 had no open-edge marks
     assert_eq!(MresFile::parse(v).unwrap_err(), MresError::WrongVersion { found: 1 });
+    // Version 2 stored the GPU layout itself (docs/FORMAT.md §8): refused, never misread.
+    let mut v = bytes.clone();
+    v[4] = 2;
+    assert_eq!(MresFile::parse(v).unwrap_err(), MresError::WrongVersion { found: 2 });
     let mut v = bytes.clone();
     v[0] = b'X';
     assert_eq!(MresFile::parse(v).unwrap_err(), MresError::BadMagic);
