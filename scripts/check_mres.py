@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
-"""Independent checker for `.mres` files (format version 2).
+"""Independent checker for `.mres` files (format version 3).
 
 Written from docs/FORMAT.md alone, as a second implementation next to the Rust
 reader/validator: it reads every section with numpy, verifies checksums,
-references and ranges (spec section 7), decodes every cluster (section 5, with
+references and ranges (spec section 7), decodes every page from its encoding
+(section 4.3) to the GPU layout and every cluster from that (section 5, with
 its open-edge marks), checks the DAG invariants the selection rule relies on
 (section 6), checks the marks of level 0 and of every group, checks that uniform
 and view-dependent cuts are crack-free by counting welded edges (unmarked uses
@@ -31,6 +32,7 @@ try:
     import numpy as np
     import blake3
     import zstandard
+    import meshopt
 except ImportError as exc:  # pragma: no cover - environment problem
     print(f"check_mres: missing dependency ({exc}); "
           "pip install -r scripts/requirements.txt", file=sys.stderr)
@@ -41,13 +43,14 @@ except ImportError as exc:  # pragma: no cover - environment problem
 # ---------------------------------------------------------------------------
 
 MAGIC = b"MRES"
-VERSION = 2
+VERSION = 3
 HEADER_SIZE = 160
 GROUP_SIZE = 40
 CLUSTER_SIZE = 16
 PAGE_SIZE = 72
 CLUSTER_HEADER_SIZE = 48
 MAX_RAW_SIZE = 16 * 1024 * 1024
+MAX_ENCODED_SIZE = 32 * 1024 * 1024
 NONE = 0xFFFFFFFF
 
 FLAG_NORMALS = 1
@@ -183,15 +186,14 @@ def read_bits(words, word0, bitpos, width):
     return (((lo | hi) >> shift) & mask).astype(np.int64)
 
 
-def decompress_frames(comp, raw_size):
+def decompress_frames(comp, limit):
     """Decompress one or more concatenated zstd frames, producing at most
-    raw_size + 1 bytes (so an oversized page is detected without inflating
-    it)."""
+    limit + 1 bytes (so an oversized page is detected without inflating it)."""
     dctx = zstandard.ZstdDecompressor()
     reader = dctx.stream_reader(io.BytesIO(comp), read_across_frames=True)
     chunks = []
     got = 0
-    limit = raw_size + 1
+    limit = limit + 1
     while got < limit:
         chunk = reader.read(min(limit - got, 1 << 20))
         if not chunk:
@@ -199,6 +201,224 @@ def decompress_frames(comp, raw_size):
         chunks.append(chunk)
         got += len(chunk)
     return b"".join(chunks)
+
+
+# ---------------------------------------------------------------------------
+# page encoding (spec section 4.3) and the GPU layout it decodes to (section 5)
+# ---------------------------------------------------------------------------
+
+class PageError(Exception):
+    """Encoded page bytes that do not decode (spec section 4.3)."""
+
+
+def max_encoded_len(flags, vcs, tcs):
+    """E_max of section 4.3 for a page of clusters with these counts."""
+    n, V, T = len(vcs), int(sum(vcs)), int(sum(tcs))
+    return (4 + 2 * n + 17 * n + 8 * T + T + 12 * V + (4 * V if flags & FLAG_NORMALS else 0)
+            + (4 * V if flags & FLAG_UVS else 0) + (2 * T if flags & FLAG_MATERIALS else 0))
+
+
+def planes(enc, at, count, nplanes):
+    """count values stored as nplanes byte planes at enc[at:] (section 4.3)."""
+    out = np.zeros(count, dtype=np.int64)
+    for p in range(nplanes):
+        out |= np.frombuffer(enc, np.uint8, count, at + p * count).astype(np.int64) << (8 * p)
+    return out.tolist()
+
+
+def unzigzag(z, bits):
+    r = (z >> 1) ^ -(z & 1)
+    return r
+
+
+def decoding_order(tri, vc):
+    """(vertex, prediction) in decoding order (section 4.3): a prediction is
+    ("par", a, b, d), ("vtx", a) or ("anchor",)."""
+    seen = [False] * vc
+    edges = {}
+    out = []
+    for t in range(len(tri) // 3):
+        c = tri[3 * t:3 * t + 3]
+        for k in range(3):
+            v = c[k]
+            if seen[v]:
+                continue
+            a, b = c[(k + 1) % 3], c[(k + 2) % 3]
+            if seen[a] and seen[b] and (min(a, b), max(a, b)) in edges:
+                pred = ("par", a, b, edges[(min(a, b), max(a, b))])
+            elif seen[a]:
+                pred = ("vtx", a)
+            elif seen[b]:
+                pred = ("vtx", b)
+            else:
+                pred = ("vtx", out[-1][0]) if out else ("anchor",)
+            seen[v] = True
+            out.append((v, pred))
+        for k in range(3):
+            x, y = c[k], c[(k + 1) % 3]
+            edges[(min(x, y), max(x, y))] = c[(k + 2) % 3]
+    for v in range(vc):
+        if not seen[v]:
+            out.append((v, ("vtx", out[-1][0]) if out else ("anchor",)))
+    return out
+
+
+def rebuild(order, residuals, lanes, anchor, wrap):
+    """Values of one attribute from its residuals (lanes per vertex)."""
+    values = [None] * len(order)
+    for j, (v, pred) in enumerate(order):
+        r = residuals[lanes * j:lanes * j + lanes]
+        if pred[0] == "par":
+            a, b, d = values[pred[1]], values[pred[2]], values[pred[3]]
+            p = [a[k] + b[k] - d[k] for k in range(lanes)]
+        elif pred[0] == "vtx":
+            p = values[pred[1]]
+        else:
+            p = anchor
+        values[v] = [wrap(p[k] + r[k]) for k in range(lanes)]
+    return values
+
+
+def wrap32(x):
+    return ((x + (1 << 31)) & 0xFFFFFFFF) - (1 << 31)
+
+
+def wrap16(x):
+    return x & 0xFFFF
+
+
+def decode_encoded_page(enc, vcs, tcs, flags):
+    """The clusters of a page from its encoded bytes (section 4.3): per cluster
+    a dict of grid coordinates q, octahedral values, UVs, indices, marks and
+    materials. Raises PageError."""
+    n, V, T = len(vcs), int(sum(vcs)), int(sum(tcs))
+    if len(enc) < 4 + 2 * n:
+        raise PageError(f"{len(enc)} encoded bytes, shorter than the preamble and index lengths")
+    P = enc[0]
+    if not 1 <= P <= 4 or any(enc[1:4]):
+        raise PageError(f"preamble {enc[0:4].hex()}: plane count outside 1..=4 or reserved bytes not zero")
+    lengths = struct.unpack_from(f"<{n}H", enc, 4)
+    for i, (L, t) in enumerate(zip(lengths, tcs)):
+        if L > 17 + 8 * t:
+            raise PageError(f"cluster {i} of the page: {L} bytes of coded indices for {t} triangles "
+                            f"(at most {17 + 8 * t})")
+    has_n, has_u, has_m = bool(flags & FLAG_NORMALS), bool(flags & FLAG_UVS), bool(flags & FLAG_MATERIALS)
+    expect = 4 + 2 * n + sum(lengths) + T + 3 * P * V + 4 * V * has_n + 4 * V * has_u + 2 * T * has_m
+    if len(enc) != expect:
+        raise PageError(f"{len(enc)} encoded bytes, the counts, index lengths and {P} planes need {expect}")
+    at = 4 + 2 * n
+    coded_at = at
+    at += sum(lengths)
+    marks = list(enc[at:at + T])
+    at += T
+    bad = [m for m in marks if m > 7]
+    if bad:
+        raise PageError(f"open-edge mark {bad[0]} has bits above bit 2")
+    pos = [unzigzag(z, 32) for z in planes(enc, at, 3 * V, P)]
+    at += 3 * P * V
+    nrm = uvs = mat = None
+    if has_n:
+        nrm = [unzigzag(z, 16) for z in planes(enc, at, 2 * V, 2)]
+        at += 4 * V
+    if has_u:
+        uvs = [unzigzag(z, 16) for z in planes(enc, at, 2 * V, 2)]
+        at += 4 * V
+    if has_m:
+        mat = planes(enc, at, T, 2)
+    out = []
+    vo = to = 0
+    anchors = [[0, 0, 0], [0, 0], [0, 0]]
+    for i, (L, vc, tc) in enumerate(zip(lengths, vcs, tcs)):
+        vc, tc = int(vc), int(tc)
+        coded = bytes(enc[coded_at:coded_at + L])
+        coded_at += L
+        try:
+            tri = meshopt.decode_index_buffer(coded, 3 * tc, 4).astype(np.int64).tolist()
+        except Exception as exc:  # the codec's own error, whatever its type
+            raise PageError(f"cluster {i} of the page: the index codec rejects its {L} bytes ({exc})")
+        # indices >= vertex_count are reported on the GPU layout; here they
+        # would name vertices that do not exist: clamp for the prediction only
+        safe = [min(x, vc - 1) if x >= vc else x for x in tri]
+        if any(x >= 256 for x in tri):
+            raise PageError(f"cluster {i} of the page: decoded index {max(tri)} does not fit in a u8")
+        order = decoding_order(safe, vc)
+        first = order[0][0]
+        c = {"indices": tri, "marks": marks[to:to + tc]}
+        c["q"] = rebuild(order, pos[3 * vo:3 * (vo + vc)], 3, anchors[0], wrap32)
+        anchors[0] = c["q"][first]
+        if has_n:
+            c["normals"] = rebuild(order, nrm[2 * vo:2 * (vo + vc)], 2, anchors[1], wrap16)
+            anchors[1] = c["normals"][first]
+        if has_u:
+            c["uvs"] = rebuild(order, uvs[2 * vo:2 * (vo + vc)], 2, anchors[2], wrap16)
+            anchors[2] = c["uvs"][first]
+        if has_m:
+            c["materials"] = mat[to:to + tc]
+        out.append(c)
+        vo += vc
+        to += tc
+    return out
+
+
+def pack_bits(records, widths):
+    """A bit stream (section 5.2) of records of fields with these widths."""
+    acc = 0
+    bit = 0
+    for rec in records:
+        for value, w in zip(rec, widths):
+            acc |= value << bit
+            bit += w
+    return acc.to_bytes((bit + 31) // 32 * 4, "little")
+
+
+def ranged(values, lanes):
+    """(minimum, bits, bit stream) of values as offsets from their per-lane
+    minimum (section 5: position_min/bits, normal_min/bits)."""
+    lo = [min(v[k] for v in values) for k in range(lanes)]
+    bits = [(max(v[k] for v in values) - lo[k]).bit_length() for k in range(lanes)]
+    return lo, bits, pack_bits([[v[k] - lo[k] for k in range(lanes)] for v in values], bits)
+
+
+def pad4(b):
+    return b + b"\0" * (-len(b) % 4)
+
+
+def gpu_layout(clusters, flags):
+    """The GPU layout (section 5) of decoded clusters: headers, then every
+    cluster's positions, normals, UVs, indices (+ open-edge block), materials."""
+    heads = []
+    blocks = []
+    for c in clusters:
+        vc, tc = len(c["q"]), len(c["indices"]) // 3
+        pmin, pbits, pos = ranged(c["q"], 3)
+        nmin, nbits, nrm = ([0, 0], [0, 0], None)
+        if flags & FLAG_NORMALS:
+            nmin, nbits, nrm = ranged(c["normals"], 2)
+        uvs = b"".join(struct.pack("<HH", *uv) for uv in c["uvs"]) if flags & FLAG_UVS else None
+        idx = bytes(x & 0xFF for x in c["indices"])
+        edge_flags = EDGE_OPEN if any(c["marks"]) else 0
+        if edge_flags:
+            idx = pad4(idx) + pack_bits([[m] for m in c["marks"]], [3])
+        mat = b"".join(struct.pack("<H", m) for m in c["materials"]) if flags & FLAG_MATERIALS else None
+        heads.append((vc, tc, pmin, pbits, edge_flags, nmin, nbits))
+        blocks.append([pos, nrm, uvs, idx, mat])
+    at = CLUSTER_HEADER_SIZE * len(clusters)
+    offsets = [[0] * 5 for _ in clusters]
+    body = []
+    for kind in range(5):
+        for i, b in enumerate(blocks):
+            if b[kind] is not None:
+                offsets[i][kind] = at
+                body.append(pad4(b[kind]))
+                at += len(body[-1])
+    out = []
+    for (vc, tc, pmin, pbits, ef, nmin, nbits), offs in zip(heads, offsets):
+        # a minimum outside i32 cannot be stored: the file is invalid
+        if not all(-(1 << 31) <= x < (1 << 31) for x in pmin):
+            raise PageError("a grid coordinate overflows i32")
+        out.append(struct.pack("<HH3i3BB5I2H2BH", vc, tc, *pmin, *pbits, ef, *offs, *[x & 0xFFFF for x in nmin],
+                               *[min(x, 255) for x in nbits], 0))
+    return b"".join(out) + b"".join(body)
 
 
 def count_frames(comp):
@@ -270,6 +490,9 @@ class Checker:
         if version == 1:
             r.fatal("bad_version", f"version 1, this checker reads version {VERSION} only (version 1 has no "
                                    "open-edge marks; re-bake the mesh with the current baker)")
+        if version == 2:
+            r.fatal("bad_version", f"version 2, this checker reads version {VERSION} only (version 2 stored "
+                                   "pages in the GPU layout itself; re-bake the mesh with the current baker)")
         if version != VERSION:
             r.fatal("bad_version", f"version {version}, this checker reads version {VERSION}")
         if header_size != HEADER_SIZE:
@@ -666,22 +889,33 @@ class Checker:
                 r.violation("page_checksum", f"page {p}: BLAKE3 of its {len(comp)} compressed bytes does not match the page record")
                 continue
             rs = int(self.prsize[p])
+            first, n = int(self.pfirst[p]), int(self.pcount[p])
+            vcs, tcs = self.cvc[first:first + n], self.ctc[first:first + n]
+            most = max_encoded_len(self.flags, vcs, tcs)
+            if most > MAX_ENCODED_SIZE:
+                r.violation("page_encoding", f"page {p}: its clusters could encode to {most} bytes (limit 32 MiB)")
+                continue
             try:
-                raw = decompress_frames(comp, rs)
+                enc = decompress_frames(comp, most)
             except zstandard.ZstdError as exc:
                 r.violation("page_decompress", f"page {p}: zstd error: {exc}")
                 continue
+            if len(enc) > most:
+                r.violation("page_decompress", f"page {p}: decompresses to more than the {most} bytes its counts allow")
+                continue
+            try:
+                raw = gpu_layout(decode_encoded_page(enc, vcs, tcs, self.flags), self.flags)
+            except PageError as exc:
+                r.violation("page_encoding", f"page {p}: {exc}")
+                continue
             if len(raw) != rs:
-                more = "more than" if len(raw) > rs else f"{len(raw)} bytes,"
-                r.violation("page_raw_size", f"page {p}: decompresses to {more} raw_size {rs}")
+                r.violation("page_raw_size", f"page {p}: decodes to a {len(raw)}-byte GPU layout, raw_size says {rs}")
                 continue
             if len(frames) < 64:
                 frames.append(count_frames(comp))
-            n = int(self.pcount[p])
             if CLUSTER_HEADER_SIZE * n > rs:
                 r.violation("page_headers", f"page {p}: {n} cluster headers do not fit in {rs} bytes")
                 continue
-            first = int(self.pfirst[p])
             hdr[first:first + n] = np.frombuffer(raw, CHDR_DT, count=n)
             have_hdr[first:first + n] = True
             self.page_decoded[p] = True

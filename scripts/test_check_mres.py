@@ -3,7 +3,8 @@
 Small meshes are generated and baked with the Rust tools (`mres generate`,
 `bake-all`); the checker must pass them, agree with `mres validate --json`, and
 catch corruptions made here byte by byte or by re-laying a page out with the
-small page codec below (holes, T-junctions, wrong open-edge marks). Skipped when
+small page codec below (holes, T-junctions, wrong open-edge marks, broken
+page encodings). Skipped when
 the Rust tools are not built (cargo build --release -p mres-cli).
 
 Run: .venv/bin/pytest scripts/test_check_mres.py -q
@@ -18,6 +19,8 @@ import sys
 from pathlib import Path
 
 import blake3
+import meshopt
+import numpy as np
 import pytest
 import zstandard
 
@@ -71,129 +74,197 @@ def fix_meta_checksum(data):
 
 
 # --------------------------------------------------------------------------
-# a small page codec written here from docs/FORMAT.md §5 (not from the
-# checker): decodes a page's clusters into their blocks, lets a test change
-# them, and lays the page out again (re-sealing both checksums)
+# a small page codec written here from docs/FORMAT.md §4.3 and §5 (not from
+# the checker): decodes a page's clusters, lets a test change them, and
+# encodes the page again (re-sealing both checksums)
 # --------------------------------------------------------------------------
 
 NONE = 0xFFFFFFFF
 FLAG_NORMALS, FLAG_UVS, FLAG_MATERIALS = 1, 2, 4
-OPEN_EDGES = 1
 
 
-def bits_get(stream, bit, width):
-    """Value of `width` bits at `bit` of a bit stream held as one integer (§5.2)."""
-    return (stream >> bit) & ((1 << width) - 1)
-
-
-def bits_bytes(stream, total_bits):
-    return stream.to_bytes((total_bits + 31) // 32 * 4, "little")
-
-
-def page_raw(data, p):
+def page_encoded(data, p):
     rec = page(data, p)
     comp = bytes(data[rec["offset"]:rec["offset"] + rec["csize"]])
-    raw = zstandard.ZstdDecompressor().stream_reader(comp, read_across_frames=True).read(rec["rsize"] + 1)
-    assert len(raw) == rec["rsize"]
-    return raw
+    return zstandard.ZstdDecompressor().stream_reader(comp, read_across_frames=True).read()
 
 
-def decode_page(data, p):
-    """The clusters of page p: header fields, decoded positions (grid
-    coordinates), indices and marks, and the other blocks as bytes."""
-    flags = struct.unpack_from("<I", data, 12)[0]
-    raw = page_raw(data, p)
-    rec = page(data, p)
-    out = []
-    for i in range(rec["count"]):
-        h = 48 * i
-        vc, tc = struct.unpack_from("<HH", raw, h)
-        pmin = list(struct.unpack_from("<3i", raw, h + 4))
-        pbits = list(raw[h + 16:h + 19])
-        edge_flags = raw[h + 19]
-        offs = struct.unpack_from("<5I", raw, h + 20)
-        nbits = list(raw[h + 44:h + 46])
-        stride = sum(pbits)
-        pos = int.from_bytes(raw[offs[0]:offs[0] + (vc * stride + 31) // 32 * 4], "little")
-        q = []
-        for v in range(vc):
-            rec_v = bits_get(pos, v * stride, stride)
-            q.append([pmin[0] + bits_get(rec_v, 0, pbits[0]), pmin[1] + bits_get(rec_v, pbits[0], pbits[1]),
-                      pmin[2] + bits_get(rec_v, pbits[0] + pbits[1], pbits[2])])
-        nstride = sum(nbits)
-        normals = (int.from_bytes(raw[offs[1]:offs[1] + (vc * nstride + 31) // 32 * 4], "little")
-                   if flags & FLAG_NORMALS else 0)
-        uvs = raw[offs[2]:offs[2] + 4 * vc] if flags & FLAG_UVS else b""
-        indices = list(raw[offs[3]:offs[3] + 3 * tc])
-        marks = [0] * tc
-        if edge_flags & OPEN_EDGES:
-            start = offs[3] + (3 * tc + 3) // 4 * 4
-            stream = int.from_bytes(raw[start:start + (3 * tc + 31) // 32 * 4], "little")
-            marks = [bits_get(stream, 3 * t, 3) for t in range(tc)]
-        materials = raw[offs[4]:offs[4] + 2 * tc] if flags & FLAG_MATERIALS else b""
-        out.append({"index": rec["first"] + i, "q": q, "pmin": pmin, "pbits": pbits, "header": raw[h:h + 48],
-                    "nbits": nbits, "normals": normals, "uvs": uvs, "indices": indices, "marks": marks,
-                    "materials": materials})
+def byte_planes(enc, at, count, n):
+    return [sum(enc[at + p * count + i] << (8 * p) for p in range(n)) for i in range(count)]
+
+
+def signed(z):
+    return (z >> 1) ^ -(z & 1)
+
+
+def prediction_order(tri, vc):
+    """[(vertex, (a, b, d) | (a,) | ())] in decoding order (§4.3)."""
+    seen, pairs, out = set(), {}, []
+    for t in range(0, len(tri), 3):
+        c = tri[t:t + 3]
+        for k in range(3):
+            if c[k] in seen:
+                continue
+            a, b = c[(k + 1) % 3], c[(k + 2) % 3]
+            key = frozenset((a, b))
+            if a in seen and b in seen and key in pairs:
+                pred = (a, b, pairs[key])
+            elif a in seen or b in seen:
+                pred = (a,) if a in seen else (b,)
+            else:
+                pred = (out[-1][0],) if out else ()
+            seen.add(c[k])
+            out.append((c[k], pred))
+        for k in range(3):
+            pairs[frozenset((c[k], c[(k + 1) % 3]))] = c[(k + 2) % 3]
+    for v in range(vc):
+        if v not in seen:
+            out.append((v, (out[-1][0],)))
     return out
 
 
-def encode_page(clusters):
-    """Lays a page out as §5 describes the writer: headers, then each kind of
-    block cluster by cluster, the open-edge block right after its indices."""
-    blocks = []
+def predicted(values, pred, anchor):
+    if len(pred) == 3:
+        return [values[pred[0]][k] + values[pred[1]][k] - values[pred[2]][k] for k in range(len(anchor))]
+    return values[pred[0]] if pred else anchor
+
+
+def decode_page(data, p):
+    """The clusters of page p: grid coordinates q, octahedral normals, UVs,
+    indices, marks and materials (lists; None for what the file lacks)."""
+    flags = struct.unpack_from("<I", data, 12)[0]
+    rec = page(data, p)
+    cls = [cluster(data, rec["first"] + i) for i in range(rec["count"])]
+    enc = page_encoded(data, p)
+    n, V, T = len(cls), sum(c["vc"] for c in cls), sum(c["tc"] for c in cls)
+    planes = enc[0]
+    lengths = struct.unpack_from(f"<{n}H", enc, 4)
+    at = 4 + 2 * n
+    coded_at = at
+    at += sum(lengths)
+    marks = list(enc[at:at + T])
+    at += T
+    attrs = {"q": (byte_planes(enc, at, 3 * V, planes), 3, 32)}
+    at += 3 * planes * V
+    for name, flag in (("normals", FLAG_NORMALS), ("uvs", FLAG_UVS)):
+        if flags & flag:
+            attrs[name] = (byte_planes(enc, at, 2 * V, 2), 2, 16)
+            at += 4 * V
+    materials = byte_planes(enc, at, T, 2) if flags & FLAG_MATERIALS else None
+    anchors = {name: [0] * lanes for name, (_, lanes, _) in attrs.items()}
+    out, vo, to = [], 0, 0
+    for i, (c, L) in enumerate(zip(cls, lengths)):
+        tri = [int(x) for x in meshopt.decode_index_buffer(bytes(enc[coded_at:coded_at + L]), 3 * c["tc"], 4)]
+        coded_at += L
+        order = prediction_order(tri, c["vc"])
+        d = {"index": rec["first"] + i, "indices": tri, "marks": marks[to:to + c["tc"]],
+             "materials": materials[to:to + c["tc"]] if materials else None, "normals": None, "uvs": None}
+        for name, (res, lanes, bits) in attrs.items():
+            values = [None] * c["vc"]
+            for j, (v, pred) in enumerate(order):
+                r = res[lanes * (vo + j):lanes * (vo + j + 1)]
+                values[v] = [(x + signed(z)) % (1 << bits) for x, z in zip(predicted(values, pred, anchors[name]), r)]
+            anchors[name] = values[order[0][0]]
+            if bits == 32:
+                values = [[x - (1 << 32) if x >= 1 << 31 else x for x in v] for v in values]
+            d[name] = values
+        out.append(d)
+        vo, to = vo + c["vc"], to + c["tc"]
+    return out
+
+
+def canonical(indices, marks):
+    """The triangles as the index codec gives them back (corners maybe
+    rotated), marks rotated along (§4.3: what the writer stores)."""
+    coded = meshopt.encode_index_buffer(np.array(indices, dtype=np.uint32))
+    back = [int(x) for x in meshopt.decode_index_buffer(coded, len(indices), 4)]
+    moved = []
+    for t, m in enumerate(marks):
+        o, r = indices[3 * t:3 * t + 3], back[3 * t:3 * t + 3]
+        s = next(s for s in range(3) if all(r[k] == o[(k + s) % 3] for k in range(3)))
+        moved.append(sum(((m >> ((k + s) % 3)) & 1) << k for k in range(3)))
+    return back, moved, coded
+
+
+def gpu_size(c, flags):
+    """Bytes of a cluster's blocks in the GPU layout (§5), padding included."""
+    def bits(values, lanes):
+        return sum((max(v[k] for v in values) - min(v[k] for v in values)).bit_length() for k in range(lanes))
+    vc, tc = len(c["q"]), len(c["indices"]) // 3
+    words = lambda b: (b + 31) // 32 * 4  # noqa: E731
+    size = 48 + words(vc * bits(c["q"], 3)) + (3 * tc + 3) // 4 * 4
+    size += words(3 * tc) if any(c["marks"]) else 0
+    size += words(vc * bits(c["normals"], 2)) if flags & FLAG_NORMALS else 0
+    size += 4 * vc if flags & FLAG_UVS else 0
+    size += (2 * tc + 3) // 4 * 4 if flags & FLAG_MATERIALS else 0
+    return size
+
+
+def zigzag(r, bits):
+    r = (r + (1 << (bits - 1))) % (1 << bits) - (1 << (bits - 1))
+    return ((r << 1) ^ (r >> (bits - 1))) & ((1 << bits) - 1)
+
+
+def encode_page(clusters, flags):
+    """The page's streams (§4.3) and its GPU layout size (§5)."""
+    lengths, coded, marks, materials = b"", b"", [], []
+    res = {"q": [], "normals": [], "uvs": []}
+    anchors = {"q": [0, 0, 0], "normals": [0, 0], "uvs": [0, 0]}
     for c in clusters:
-        vc, tc = len(c["q"]), len(c["indices"]) // 3
-        stride = sum(c["pbits"])
-        pos = 0
-        for v, (x, y, z) in enumerate(c["q"]):
-            d = [x - c["pmin"][0], y - c["pmin"][1], z - c["pmin"][2]]
-            assert all(0 <= d[k] < (1 << c["pbits"][k]) for k in range(3)), "vertex outside the cluster's range"
-            pos |= (d[0] | d[1] << c["pbits"][0] | d[2] << (c["pbits"][0] + c["pbits"][1])) << (v * stride)
-        idx = bytes(c["indices"])
-        if any(c["marks"]):
-            stream = 0
-            for t, m in enumerate(c["marks"]):
-                stream |= m << (3 * t)
-            idx += b"\0" * (-len(idx) % 4) + bits_bytes(stream, 3 * tc)
-        normals = bits_bytes(c["normals"], vc * sum(c["nbits"])) if c["header"][24:28] != b"\0" * 4 else None
-        blocks.append([bits_bytes(pos, vc * stride), normals, c["uvs"] or None, idx, c["materials"] or None])
-    heads = [bytearray(c["header"]) for c in clusters]
-    body = bytearray()
-    at = 48 * len(clusters)
-    for kind in range(5):
-        for c, b, h in zip(clusters, blocks, heads):
-            off = 0
-            if b[kind] is not None:
-                off = at
-                body += b[kind] + b"\0" * (-len(b[kind]) % 4)
-                at = 48 * len(clusters) + len(body)
-            struct.pack_into("<I", h, 20 + 4 * kind, off)
-    for c, h in zip(clusters, heads):
-        struct.pack_into("<HH", h, 0, len(c["q"]), len(c["indices"]) // 3)
-        h[19] = OPEN_EDGES if any(c["marks"]) else 0
-    return b"".join(heads) + bytes(body)
+        c["indices"], c["marks"], code = canonical(c["indices"], c["marks"])
+        lengths += struct.pack("<H", len(code))
+        coded += code
+        marks += c["marks"]
+        materials += c["materials"] or []
+        # an index past the vertices (a test's corruption) predicts from the last one, as the
+        # checker reads it, so that the page decodes and the checker sees the bad index
+        order = prediction_order([min(i, len(c["q"]) - 1) for i in c["indices"]], len(c["q"]))
+        for name, bits in (("q", 32), ("normals", 16), ("uvs", 16)):
+            if c[name] is None:
+                continue
+            values = c[name]
+            for v, pred in order:
+                res[name] += [zigzag(x - p, bits) for x, p in zip(values[v], predicted(values, pred, anchors[name]))]
+            anchors[name] = values[order[0][0]]
+    planes = max(1, max((z.bit_length() + 7) // 8 for z in res["q"]))
+    streams = [bytes([planes, 0, 0, 0]), lengths, coded, bytes(marks)]
+    streams += [bytes((z >> (8 * p)) & 0xFF for z in res["q"]) for p in range(planes)]
+    for name in ("normals", "uvs"):
+        if res[name]:
+            streams += [bytes((z >> (8 * p)) & 0xFF for z in res[name]) for p in range(2)]
+    if flags & FLAG_MATERIALS:
+        streams += [bytes((m >> (8 * p)) & 0xFF for m in materials) for p in range(2)]
+    return streams, sum(gpu_size(c, flags) for c in clusters)
 
 
-def replace_page(data, p, clusters, version=None):
-    """Stores page p laid out anew from `clusters`: recompresses it, moves the
-    later pages, and fixes the page record, cluster records, and checksums."""
+def store_page(data, p, comp, raw_size=None, counts=()):
+    """Puts `comp` in place of page p's bytes: moves the later pages and fixes
+    the page record (raw_size when given), cluster counts and checksums."""
     h = header(data)
     rec = page(data, p)
-    raw = encode_page(clusters)
-    comp = zstandard.ZstdCompressor(level=3).compress(raw)
-    raw_size = len(raw)
     data[rec["offset"]:rec["offset"] + rec["csize"]] = comp
     delta = len(comp) - rec["csize"]
     for q in range(p + 1, h["P"]):
         r = page(data, q)
         struct.pack_into("<Q", data, r["rec"], r["offset"] + delta)
-    struct.pack_into("<II", data, rec["rec"] + 8, len(comp), raw_size)
+    struct.pack_into("<I", data, rec["rec"] + 8, len(comp))
+    if raw_size is not None:
+        struct.pack_into("<I", data, rec["rec"] + 12, raw_size)
     data[rec["rec"] + 16:rec["rec"] + 48] = blake3.blake3(comp).digest()
-    for c in clusters:
-        struct.pack_into("<HH", data, 160 + 40 * h["G"] + 16 * c["index"] + 8, len(c["q"]), len(c["indices"]) // 3)
-    if version is not None:
-        struct.pack_into("<I", data, 4, version)
+    for index, vc, tc in counts:
+        struct.pack_into("<HH", data, 160 + 40 * h["G"] + 16 * index + 8, vc, tc)
     fix_meta_checksum(data)
+
+
+def replace_page(data, p, clusters, edit=None):
+    """Stores page p encoded anew from `clusters` (`edit` may change the
+    streams first), one zstd frame per stream as the writer does."""
+    flags = struct.unpack_from("<I", data, 12)[0]
+    streams, raw_size = encode_page(clusters, flags)
+    if edit:
+        edit(streams)
+    comp = b"".join(zstandard.ZstdCompressor(level=3).compress(s) for s in streams if s)
+    store_page(data, p, comp, raw_size, [(c["index"], len(c["q"]), len(c["indices"]) // 3) for c in clusters])
 
 
 def all_clusters(data):
@@ -228,7 +299,7 @@ def baked(tmp_path_factory):
     files = {k: out / f"{k}.mres" for k in ("sphere", "terrain", "boxes")}
     for f in files.values():
         assert f.exists(), f
-        assert struct.unpack_from("<I", f.read_bytes(), 4)[0] == 2, f"{f}: not format version 2 (stale build?)"
+        assert struct.unpack_from("<I", f.read_bytes(), 4)[0] == 3, f"{f}: not format version 3 (stale build?)"
     return d, files
 
 
@@ -377,39 +448,19 @@ def test_bad_magic(baked):
 
 def test_changed_index_fails_crack_check(baked):
     """Change one triangle of a level-0 cluster in the last page (level-0 pages
-    are last, so no other page moves), re-encode the page as a single zstd
-    frame and fix both checksums: only the cut checks can notice."""
+    are last, so no other page moves), re-encode the page and fix both
+    checksums: only the cut checks can notice."""
     info = {}
 
     def mutate(data):
-        h = header(data)
-        p = h["P"] - 1
-        rec = page(data, p)
-        comp = bytes(data[rec["offset"]:rec["offset"] + rec["csize"]])
-        assert rec["offset"] + rec["csize"] == len(data)
-        dobj = zstandard.ZstdDecompressor()
-        raw = bytearray(dobj.stream_reader(comp, read_across_frames=True).read(rec["rsize"] + 1))
-        assert len(raw) == rec["rsize"]
-        for i in range(rec["count"]):
-            c = rec["first"] + i
-            cl = cluster(data, c)
-            if cl["own"] == 0xFFFFFFFF and cl["vc"] > 3:
-                break
-        else:
-            raise AssertionError("no level-0 cluster in the last page")
-        hdr = 48 * i
-        idx_off = struct.unpack_from("<I", raw, hdr + 32)[0]
-        vc = struct.unpack_from("<H", raw, hdr)[0]
-        t0 = raw[idx_off:idx_off + 3]
+        p = header(data)["P"] - 1
+        cls = decode_page(data, p)
+        i = next(i for i, c in enumerate(cls) if cluster(data, c["index"])["own"] == NONE and len(c["q"]) > 3)
+        c = cls[i]
         # move the first corner of triangle 0 to a vertex not in the triangle
-        new = next(v for v in range(vc) if v not in t0)
-        raw[idx_off] = new
-        info["cluster"] = c
-        new_comp = zstandard.ZstdCompressor(level=3).compress(bytes(raw))
-        data[rec["offset"]:] = new_comp
-        struct.pack_into("<I", data, rec["rec"] + 8, len(new_comp))
-        data[rec["rec"] + 16:rec["rec"] + 48] = blake3.blake3(new_comp).digest()
-        fix_meta_checksum(data)
+        c["indices"][0] = next(v for v in range(len(c["q"])) if v not in c["indices"][:3])
+        info["cluster"] = c["index"]
+        replace_page(data, p, cls)
 
     proc = run_checker(corrupted(baked, "sphere", "index", mutate), *FAST)
     assert_caught(proc, "cracked_cut")
@@ -421,19 +472,13 @@ def test_changed_index_fails_crack_check(baked):
 
 
 def test_out_of_range_index_is_reported(baked):
+    """An index naming a vertex the cluster does not have, in a valid index
+    coding (§4.3: the reader checks the decoded indices)."""
     def mutate(data):
-        h = header(data)
-        rec = page(data, h["P"] - 1)
-        comp = bytes(data[rec["offset"]:rec["offset"] + rec["csize"]])
-        raw = bytearray(zstandard.ZstdDecompressor().stream_reader(comp, read_across_frames=True).read())
-        idx_off = struct.unpack_from("<I", raw, 32)[0]
-        assert struct.unpack_from("<H", raw, 0)[0] <= 255
-        raw[idx_off + 1] = 255
-        new_comp = zstandard.ZstdCompressor().compress(bytes(raw))
-        data[rec["offset"]:] = new_comp
-        struct.pack_into("<I", data, rec["rec"] + 8, len(new_comp))
-        data[rec["rec"] + 16:rec["rec"] + 48] = blake3.blake3(new_comp).digest()
-        fix_meta_checksum(data)
+        p = header(data)["P"] - 1
+        cls = decode_page(data, p)
+        cls[0]["indices"][1] = len(cls[0]["q"])
+        replace_page(data, p, cls)
     proc = run_checker(corrupted(baked, "terrain", "oob", mutate), *FAST)
     assert_caught(proc, "index_out_of_range")
 
@@ -442,7 +487,7 @@ def test_one_bad_file_among_good_ones_exits_1(baked):
     _, files = baked
 
     def mutate(data):
-        data[4] = 3  # version
+        data[4] = 2  # version
     bad = corrupted(baked, "boxes", "version", mutate)
     proc = run_checker(files["terrain"], bad, *FAST)
     assert_caught(proc, "bad_version")
@@ -556,7 +601,7 @@ def test_hole_fails_level0_and_cut_rules(baked):
         p, cls, i = pick(data, True, lambda c: len(c["indices"]) > 3)
         cls[i]["indices"] = cls[i]["indices"][:3]
         cls[i]["marks"] = cls[i]["marks"][:1]
-        cls[i]["materials"] = cls[i]["materials"][:2]
+        cls[i]["materials"] = cls[i]["materials"][:1] if cls[i]["materials"] else None
         info["cluster"] = cls[i]["index"]
         replace_page(data, p, cls)
     proc = run_on(baked, "sphere", "hole", mutate)
@@ -597,10 +642,11 @@ def test_t_junction_is_caught(baked, level0):
         m = len(c["q"])
         c["q"].append([(x + y) // 2 for x, y in zip(c["q"][a], c["q"][b])])
         assert c["q"][m] not in (c["q"][a], c["q"][b])
-        stride = sum(c["nbits"])
-        c["normals"] |= bits_get(c["normals"], a * stride, stride) << (m * stride)
-        c["uvs"] = c["uvs"] + c["uvs"][4 * a:4 * a + 4] if c["uvs"] else c["uvs"]
-        c["materials"] = c["materials"] + c["materials"][2 * t:2 * t + 2] if c["materials"] else c["materials"]
+        for name in ("normals", "uvs"):
+            if c[name]:
+                c[name].append(c[name][a])
+        if c["materials"]:
+            c["materials"].append(c["materials"][t])
         mark = c["marks"][t]
         bc, ca = mark >> ((k + 1) % 3) & 1, mark >> ((k + 2) % 3) & 1
         c["indices"][3 * t:3 * t + 3] = [a, m, o]   # edges am, mo, oa
@@ -655,7 +701,8 @@ def test_marks_on_an_open_edge_twice_are_caught(baked):
         t, _ = marked_use(c)
         c["indices"] += c["indices"][3 * t:3 * t + 3]
         c["marks"].append(c["marks"][t])
-        c["materials"] = c["materials"] + c["materials"][2 * t:2 * t + 2] if c["materials"] else c["materials"]
+        if c["materials"]:
+            c["materials"].append(c["materials"][t])
         replace_page(data, p, cls)
     proc = run_on(baked, "terrain", "marktwice", mutate)
     assert_caught(proc, "group_marked_twice")
@@ -664,56 +711,74 @@ def test_marks_on_an_open_edge_twice_are_caught(baked):
 
 
 # --------------------------------------------------------------------------
-# the reader's checks of the open-edge block (docs/FORMAT.md §5.7, §7)
+# the reader's checks of the page encoding (docs/FORMAT.md §4.3, §7)
 # --------------------------------------------------------------------------
 
-def edit_header_byte(baked, name, tag, cluster_in_page, value):
+def edit_streams(baked, name, tag, edit):
     def mutate(data):
-        raw = bytearray(page_raw(data, 0))
-        raw[48 * cluster_in_page + 19] = value
-        comp = zstandard.ZstdCompressor().compress(bytes(raw))
-        rec = page(data, 0)
-        assert header(data)["P"] == 1
-        data[rec["offset"]:] = comp
-        struct.pack_into("<I", data, rec["rec"] + 8, len(comp))
-        data[rec["rec"] + 16:rec["rec"] + 48] = blake3.blake3(comp).digest()
-        fix_meta_checksum(data)
+        replace_page(data, 0, decode_page(data, 0), edit)
     return run_on(baked, name, tag, mutate)
 
 
-def test_unknown_edge_flags_bit(baked):
-    proc = edit_header_byte(baked, "sphere", "edgeflags", 0, 0x02)
-    assert_caught(proc, "cluster_edge_flags")
-    assert "cluster 0" in proc.stdout
+def test_reencoded_page_passes(baked):
+    """The test codec writes what the writer writes: a page decoded and encoded
+    again gives a file the checker passes."""
+    def edit(streams):
+        pass
+    proc = edit_streams(baked, "terrain", "reencoded", edit)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
-def test_open_edge_flag_without_a_block_overlaps_the_next_block(baked):
-    """On a closed mesh no cluster has a block: the flag on cluster 0 makes its
-    block land on the next cluster's indices."""
-    proc = edit_header_byte(baked, "sphere", "noblock", 0, 0x01)
-    assert_caught(proc, "open_edge_block_overlap")
-    assert "open-edge block of cluster 0" in proc.stdout, proc.stdout
+def test_mark_over_seven_is_rejected(baked):
+    def edit(streams):
+        streams[3] = bytes([8]) + streams[3][1:]
+    proc = edit_streams(baked, "sphere", "mark8", edit)
+    assert_caught(proc, "page_encoding")
+    assert "open-edge mark 8" in proc.stdout, proc.stdout
 
 
-def test_nonzero_unused_mark_bits(baked):
+@pytest.mark.parametrize("which", ["planes0", "planes5", "reserved"])
+def test_bad_preamble_is_rejected(baked, which):
+    def edit(streams):
+        planes = streams[0][0]
+        streams[0] = {"planes0": b"\0\0\0\0", "planes5": b"\5\0\0\0", "reserved": bytes([planes, 0, 1, 0])}[which]
+    proc = edit_streams(baked, "sphere", f"preamble-{which}", edit)
+    assert_caught(proc, "page_encoding")
+    assert "preamble" in proc.stdout, proc.stdout
+
+
+def test_short_encoding_is_rejected(baked):
+    def edit(streams):
+        streams[-1] = streams[-1][:-1]
+    proc = edit_streams(baked, "sphere", "short", edit)
+    assert_caught(proc, "page_encoding")
+    assert "encoded bytes" in proc.stdout, proc.stdout
+
+
+def test_wrong_raw_size_is_rejected(baked):
     def mutate(data):
-        p, cls, i = pick(data, True, lambda c: marked_use(c) is not None and (3 * len(c["indices"]) // 3) % 32)
-        raw = bytearray(encode_page(cls))
-        h = 48 * i
-        tc = len(cls[i]["indices"]) // 3
-        start = struct.unpack_from("<I", raw, h + 32)[0] + (3 * tc + 3) // 4 * 4
-        last = start + (3 * tc + 31) // 32 * 4 - 1
-        raw[last] |= 0x80                          # the last word's top bit is unused
-        comp = zstandard.ZstdCompressor().compress(bytes(raw))
-        rec = page(data, p)
-        replace_page(data, p, cls)                 # same layout and sizes, then the flipped bit
-        rec = page(data, p)
-        data[rec["offset"]:rec["offset"] + rec["csize"]] = comp
-        struct.pack_into("<I", data, rec["rec"] + 8, len(comp))
-        data[rec["rec"] + 16:rec["rec"] + 48] = blake3.blake3(comp).digest()
+        rec = page(data, 0)
+        struct.pack_into("<I", data, rec["rec"] + 12, rec["rsize"] + 4)
         fix_meta_checksum(data)
-    proc = run_on(baked, "terrain", "unusedbits", mutate)
-    assert_caught(proc, "open_edge_unused_bits")
+    proc = run_on(baked, "sphere", "rawsize", mutate)
+    assert_caught(proc, "page_raw_size")
+
+
+def test_index_codec_garbage_is_rejected(baked):
+    def edit(streams):
+        streams[2] = bytes([0x00]) + streams[2][1:]  # not the codec's version-1 header byte
+    proc = edit_streams(baked, "sphere", "codec", edit)
+    assert_caught(proc, "page_encoding")
+    assert "index codec" in proc.stdout, proc.stdout
+
+
+def test_version_2_is_rejected_with_a_clear_message(baked):
+    def mutate(data):
+        data[4] = 2
+        fix_meta_checksum(data)
+    proc = run_on(baked, "sphere", "v2", mutate)
+    assert_caught(proc, "bad_version")
+    assert "version 2" in proc.stdout and "re-bake" in proc.stdout, proc.stdout
 
 
 def test_version_1_is_rejected_with_a_clear_message(baked):

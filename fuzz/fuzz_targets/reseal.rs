@@ -1,12 +1,13 @@
 //! Shared by the `mres_reader_resealed` fuzz target and the `unseal` example: conversion
-//! between a real `.mres` file and an "unsealed" one whose pages are stored uncompressed and
-//! whose checksums are not checked, so that a mutation of a hierarchy record, page-table
-//! field or cluster byte reaches the reader's consistency checks instead of being stopped by
-//! blake3 or zstd. Field offsets are the reader's own (`mres_format::records`, which mirrors
+//! between a real `.mres` file and an "unsealed" one whose pages are stored as their encoded
+//! bytes (`docs/FORMAT.md` §4.3, zstd undone) and whose checksums are not checked, so that a
+//! mutation of a hierarchy record, page-table field or encoded page byte reaches the reader's
+//! consistency checks and page decoder instead of being stopped by blake3 or zstd. A page
+//! record's `raw_size` (the size of the GPU layout its bytes decode to) is kept as it is. Field offsets are the reader's own (`mres_format::records`, which mirrors
 //! `docs/FORMAT.md` §2 and §4.1).
 
 use mres_format::records::{meta_checksum, HeaderRecord, PageRecord};
-use mres_format::{HEADER_SIZE, PAGE_RECORD_SIZE};
+use mres_format::{HEADER_SIZE, MAX_PAGE_ENCODED_SIZE, PAGE_RECORD_SIZE};
 
 const PAGE_COUNT_AT: usize = HeaderRecord::PAGE_COUNT;
 const HIERARCHY_OFFSET_AT: usize = HeaderRecord::HIERARCHY_OFFSET;
@@ -16,7 +17,6 @@ const TABLE_SIZE_AT: usize = HeaderRecord::PAGE_TABLE_SIZE;
 const CHECKSUM_AT: usize = HeaderRecord::META_CHECKSUM;
 const REC_OFFSET: usize = PageRecord::OFFSET;
 const REC_COMPRESSED: usize = PageRecord::COMPRESSED_SIZE;
-const REC_RAW: usize = PageRecord::RAW_SIZE;
 const REC_CHECKSUM: usize = PageRecord::CHECKSUM;
 
 fn u32_at(b: &[u8], at: usize) -> Option<u32> {
@@ -55,7 +55,7 @@ fn seal_header(out: &mut [u8]) {
 
 /// Unsealed → real `.mres`: every page record whose byte range lies inside `input` has that
 /// range zstd-compressed (level 1) and appended after the page table in record order, with
-/// offset, sizes and page checksum rewritten; then the header checksum is recomputed.
+/// offset, compressed size and page checksum rewritten; then the header checksum is recomputed.
 /// Anything that does not fit this shape is passed through unchanged (the reader rejects it).
 pub fn seal(input: &[u8]) -> Vec<u8> {
     let Some((_, table, pages)) = layout(input) else { return input.to_vec() };
@@ -70,7 +70,6 @@ pub fn seal(input: &[u8]) -> Vec<u8> {
         let at = out.len() as u64;
         out[rec + REC_OFFSET..rec + REC_OFFSET + 8].copy_from_slice(&at.to_le_bytes());
         out[rec + REC_COMPRESSED..rec + REC_COMPRESSED + 4].copy_from_slice(&(frame.len() as u32).to_le_bytes());
-        out[rec + REC_RAW..rec + REC_RAW + 4].copy_from_slice(&(raw.len() as u32).to_le_bytes());
         out[rec + REC_CHECKSUM..rec + REC_CHECKSUM + 32].copy_from_slice(blake3::hash(&frame).as_bytes());
         out.extend_from_slice(&frame);
     }
@@ -78,8 +77,9 @@ pub fn seal(input: &[u8]) -> Vec<u8> {
     out
 }
 
-/// Real `.mres` → unsealed: pages decompressed in place of their frames (offsets and sizes
-/// rewritten, checksums zeroed). Used to make seeds for `mres_reader_resealed`.
+/// Real `.mres` → unsealed: pages decompressed to their encoded bytes in place of their frames
+/// (offsets and compressed sizes rewritten, checksums zeroed). Used to make seeds for
+/// `mres_reader_resealed`.
 #[allow(dead_code)]
 pub fn unseal(input: &[u8]) -> Option<Vec<u8>> {
     let (_, table, pages) = layout(input)?;
@@ -88,9 +88,8 @@ pub fn unseal(input: &[u8]) -> Option<Vec<u8>> {
         let rec = table.start + p * PAGE_RECORD_SIZE;
         let offset = u64_at(input, rec + REC_OFFSET)?;
         let size = u32_at(input, rec + REC_COMPRESSED)?;
-        let raw_size = u32_at(input, rec + REC_RAW)?;
         let frame = &input[range(offset, size as u64, input.len())?];
-        let raw = zstd::bulk::decompress(frame, raw_size as usize).ok()?;
+        let raw = zstd::bulk::decompress(frame, MAX_PAGE_ENCODED_SIZE).ok()?;
         let at = out.len() as u64;
         out[rec + REC_OFFSET..rec + REC_OFFSET + 8].copy_from_slice(&at.to_le_bytes());
         out[rec + REC_COMPRESSED..rec + REC_COMPRESSED + 4].copy_from_slice(&(raw.len() as u32).to_le_bytes());

@@ -1,44 +1,44 @@
-//! Where the bytes of a `.mres` file go, by page section, each compressed separately:
+//! Where the bytes of a `.mres` file go: the resident prefix (header, hierarchy, page table)
+//! and, per stream of the page encoding (docs/FORMAT.md §4.3; the writer compresses each
+//! stream as its own zstd frame), the compressed bytes of every page added up:
 //! `cargo run --release -p mres-cli --example size_breakdown -- FILE.mres`.
-use mres_format::MresFile;
+use mres_format::{MresFile, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS};
+
 fn main() {
-    let path = std::env::args().nth(1).unwrap();
-    let f = MresFile::open(std::path::Path::new(&path)).expect("a readable .mres file");
-    let mut cats: Vec<Vec<u8>> = vec![Vec::new(); 6];
-    for p in 0..f.pages.len() as u32 {
-        let raw = f.page(p).unwrap();
-        let info = &f.pages[p as usize];
-        for c in info.first_cluster..info.first_cluster + info.cluster_count {
-            let ci = &f.clusters[c as usize];
-            let h = &raw[ci.page_offset as usize..ci.page_offset as usize + 48];
-            cats[0].extend_from_slice(h);
-            let off = |i: usize| u32::from_le_bytes(h[20 + i * 4..24 + i * 4].try_into().unwrap()) as usize;
-            let vc = ci.vertex_count as usize;
-            let tc = ci.triangle_count as usize;
-            let pb = (h[16] + h[17] + h[18]) as usize;
-            let nb = (h[44] + h[45]) as usize;
-            let lens = [(vc * pb).div_ceil(32) * 4, (vc * nb).div_ceil(32) * 4, vc * 4, tc * 3, tc * 2];
-            for i in 0..5 {
-                if off(i) != 0 {
-                    cats[i + 1].extend_from_slice(&raw[off(i)..off(i) + lens[i]]);
-                }
-            }
+    let path = std::env::args().nth(1).expect("usage: size_breakdown FILE.mres");
+    let bytes = std::fs::read(&path).expect("a readable file");
+    let f = MresFile::parse(bytes.clone()).expect("a valid .mres file");
+    let flags = f.header.flags;
+    let names = ["indices", "marks", "positions", "normals", "uvs", "materials"];
+    let mut sizes = [0usize; 6];
+    let mut gpu = 0usize;
+    for (p, info) in f.pages.iter().enumerate() {
+        gpu += f.page(p as u32).expect("page decodes").len();
+        let mut frames = Vec::new();
+        let mut rest = &bytes[info.offset as usize..][..info.compressed_size as usize];
+        while !rest.is_empty() {
+            let n = zstd::zstd_safe::find_frame_compressed_size(rest).expect("a zstd frame");
+            frames.push(n);
+            rest = &rest[n..];
+        }
+        // Frames: preamble, index lengths and coded indices, marks, the position planes, then
+        // two planes per attribute the file carries; the position planes are what is left.
+        let attr = |flag: u32| if flags & flag != 0 { 2 } else { 0 };
+        let tail = [attr(FLAG_NORMALS), attr(FLAG_UVS), attr(FLAG_MATERIALS)];
+        let planes = frames.len() - 4 - tail.iter().sum::<usize>();
+        let counts = [3, 1, planes, tail[0], tail[1], tail[2]];
+        let mut at = 0;
+        for (size, count) in sizes.iter_mut().zip(counts) {
+            *size += frames[at..at + count].iter().sum::<usize>();
+            at += count;
         }
     }
-    let names = ["headers", "positions", "normals", "uvs", "indices", "materials"];
-    let tris = f.header.source_triangles as f64;
-    for (n, c) in names.iter().zip(&cats) {
-        let z = zstd::bulk::compress(c, 9).unwrap().len();
-        println!(
-            "{n:>10}: raw {:>9} ({:.2} B/input tri)  zstd {:>9} ({:.2} B/input tri)",
-            c.len(),
-            c.len() as f64 / tri_or(tris),
-            z,
-            z as f64 / tri_or(tris)
-        );
+    let tris = (f.header.source_triangles as f64).max(1.0);
+    let prefix = f.pages.first().map_or(f.file_size(), |p| p.offset as usize);
+    println!("{:>10}: {:>9} ({:.2} B/input tri)", "prefix", prefix, prefix as f64 / tris);
+    for (n, s) in names.iter().zip(sizes) {
+        println!("{n:>10}: {s:>9} ({:.2} B/input tri)", s as f64 / tris);
     }
-    println!("file {} ({:.2} B/tri)", f.file_size(), f.file_size() as f64 / tris);
-}
-fn tri_or(t: f64) -> f64 {
-    t.max(1.0)
+    println!("gpu layout {gpu} ({:.2} B/input tri)", gpu as f64 / tris);
+    println!("file {} ({:.2} B/input tri)", f.file_size(), f.file_size() as f64 / tris);
 }

@@ -76,6 +76,10 @@ pub struct BuilderRun {
     pub level0_fill: f64,
     /// Size of the `.mres` file (ours only).
     pub bytes: u64,
+    /// Page decoding speed (ours only): MB (10^6 bytes) of GPU layout (docs/FORMAT.md §5) per
+    /// second, decoding every page of the file on one thread, best of three passes.
+    #[serde(default)]
+    pub decode_mb_per_s: f64,
     /// Bounding-box diagonal of the input, the unit of every relative figure.
     #[serde(default)]
     pub diagonal: f64,
@@ -146,6 +150,7 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
         root_clusters: baked.stats.build.root_clusters,
         level0_fill: level0.iter().map(|c| c.triangle_count as f64).sum::<f64>() / level0.len().max(1) as f64,
         bytes: file.file_size() as u64,
+        decode_mb_per_s: decode_speed(&file)?,
         diagonal,
         ..Default::default()
     };
@@ -161,6 +166,22 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
         tris
     };
     Ok(Built { run, coarsest, cut: Box::new(cut) })
+}
+
+/// MB of GPU layout per second decoding every page of `file` ([`MresFile::page`]: checksum,
+/// zstd, page decoding) on this thread, best of three passes.
+fn decode_speed(file: &MresFile) -> anyhow::Result<f64> {
+    let mut best = f64::INFINITY;
+    let mut bytes = 0usize;
+    for _ in 0..3 {
+        let start = Instant::now();
+        bytes = 0;
+        for p in 0..file.pages.len() as u32 {
+            bytes += file.page(p)?.len();
+        }
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    Ok(bytes as f64 / 1e6 / best.max(1e-9))
 }
 
 /// clusterlod's DAG as the bench keeps it: per group (depth, error), per cluster (group,

@@ -8,6 +8,11 @@ pub struct BitWriter {
 }
 
 impl BitWriter {
+    /// A writer with room for `bits` bits, so that pushing them never reallocates.
+    pub fn with_capacity(bits: u64) -> BitWriter {
+        BitWriter { words: Vec::with_capacity(bits.div_ceil(32) as usize), bit: 0 }
+    }
+
     /// Appends the low `bits` bits of `value` (`bits` ≤ 32).
     pub fn push(&mut self, value: u32, bits: u32) {
         if bits == 0 {

@@ -60,6 +60,7 @@
 #![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod bits;
+mod codec;
 pub mod error;
 pub mod page;
 pub mod read;
@@ -76,7 +77,7 @@ pub use write::write_mres;
 /// File magic, the first four bytes.
 pub const MAGIC: [u8; 4] = *b"MRES";
 /// Format version written by this crate; readers reject any other.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 /// Size of the fixed header in bytes.
 pub const HEADER_SIZE: usize = 160;
 /// Size of one group record in the hierarchy section.
@@ -92,6 +93,9 @@ pub const CLUSTER_HEADER_SIZE: usize = 48;
 pub const PAGE_TARGET_RAW_SIZE: usize = 128 * 1024;
 /// Hard limit on a page's decompressed size; readers reject larger claims before allocating.
 pub const MAX_PAGE_RAW_SIZE: usize = 16 * 1024 * 1024;
+/// Hard limit on a page's encoded size (its compressed bytes decompressed, before decoding
+/// to the GPU layout; FORMAT.md §4.3); readers reject pages whose counts need more.
+pub const MAX_PAGE_ENCODED_SIZE: usize = 32 * 1024 * 1024;
 /// Most triangles in one cluster.
 pub const MAX_CLUSTER_TRIANGLES: usize = 128;
 /// Most vertices in one cluster (8-bit local indices).

@@ -1,9 +1,11 @@
-//! Pages: checking and decompressing a page's bytes (FORMAT.md §4.3) and decoding its clusters
-//! from the GPU layout (§5). The whole-file reader and the page-level API both decode here.
+//! Pages: checking, decompressing and decoding a page's bytes (FORMAT.md §4.3) to the GPU
+//! layout, and decoding its clusters from the GPU layout (§5). The whole-file reader and the page-level API both decode here.
 
 use super::bits::{oct_decode, read_bits};
+use super::codec;
 use super::error::{corrupt, section, MresError};
 use super::records::ClusterHeader;
+use super::write::gpu_page;
 use super::*;
 
 /// One page, checked and decompressed: its bytes in the GPU layout (FORMAT.md §5), uploaded as
@@ -45,25 +47,51 @@ pub struct DecodedCluster {
     pub open_edges: Vec<u8>,
 }
 
-/// Checks page `p`'s compressed bytes against its table entry (length, then checksum) and
-/// decompresses them to exactly `raw_size` bytes.
-pub(crate) fn decompress_page(info: &PageInfo, p: u32, compressed: &[u8]) -> Result<Vec<u8>, MresError> {
+/// Checks page `p`'s compressed bytes against its table entry (length, then checksum),
+/// decompresses them to the page's encoded bytes and decodes those (FORMAT.md §4.3) to the GPU
+/// layout (§5), which must be exactly `raw_size` bytes; `clusters` is the whole file's.
+pub(crate) fn decompress_page(
+    header: &Header,
+    clusters: &[ClusterInfo],
+    info: &PageInfo,
+    p: u32,
+    compressed: &[u8],
+) -> Result<Vec<u8>, MresError> {
     if compressed.len() as u64 != info.compressed_size as u64 {
         return Err(MresError::PageLength { page: p, len: compressed.len() as u64, expected: info.compressed_size });
     }
     if blake3::hash(compressed).as_bytes() != &info.checksum {
         return Err(MresError::Checksum(format!("page {p}")));
     }
-    // The capacity bounds the output: zstd fails rather than write more than raw_size bytes.
-    let raw = zstd::bulk::decompress(compressed, info.raw_size as usize)
+    let records = page_records(clusters, info, p)?;
+    // The counts bound the encoded size before anything is allocated; the capacity bounds the
+    // output: zstd fails rather than write more.
+    let most = codec::max_encoded_len(header.flags, records);
+    if most > MAX_PAGE_ENCODED_SIZE {
+        return Err(corrupt(format!(
+            "page {p}: its clusters could encode to {most} bytes (limit {MAX_PAGE_ENCODED_SIZE})"
+        )));
+    }
+    let encoded = zstd::bulk::decompress(compressed, most)
         .map_err(|e| MresError::Decompress { page: p, problem: e.to_string() })?;
+    let quantized = codec::decode_page(&encoded, records, header.flags, header.normal_bits)
+        .map_err(|e| MresError::Decompress { page: p, problem: e.0 })?;
+    let raw = gpu_page(&quantized, header.flags);
     if raw.len() != info.raw_size as usize {
         return Err(MresError::Decompress {
             page: p,
-            problem: format!("{} bytes, table says {}", raw.len(), info.raw_size),
+            problem: format!("decodes to {} bytes, table says {}", raw.len(), info.raw_size),
         });
     }
     Ok(raw)
+}
+
+/// The records of page `p`'s clusters.
+fn page_records<'a>(clusters: &'a [ClusterInfo], info: &PageInfo, p: u32) -> Result<&'a [ClusterInfo], MresError> {
+    let first = info.first_cluster as usize;
+    clusters
+        .get(first..first + info.cluster_count as usize)
+        .ok_or_else(|| corrupt(format!("page {p}: cluster range out of range")))
 }
 
 /// Decompresses page `p` and decodes every cluster in it; `clusters` is the whole file's.
@@ -74,11 +102,8 @@ pub(crate) fn decode_page(
     p: u32,
     compressed: &[u8],
 ) -> Result<Page, MresError> {
-    let bytes = decompress_page(info, p, compressed)?;
-    let first = info.first_cluster as usize;
-    let records = clusters
-        .get(first..first + info.cluster_count as usize)
-        .ok_or_else(|| corrupt(format!("page {p}: cluster range out of range")))?;
+    let bytes = decompress_page(header, clusters, info, p, compressed)?;
+    let records = page_records(clusters, info, p)?;
     let mut headers = Vec::with_capacity(records.len());
     let mut decoded = Vec::with_capacity(records.len());
     for (i, record) in records.iter().enumerate() {

@@ -153,7 +153,7 @@ impl MresFile {
     /// all at once, use [`MresFile::decode_page`].
     pub fn page(&self, p: u32) -> Result<Vec<u8>, MresError> {
         let (info, frame) = self.frame(p)?;
-        decompress_page(info, p, frame)
+        decompress_page(&self.header, &self.clusters, info, p, frame)
     }
 
     /// Checks, decompresses and decodes page `p`, as [`MresIndex::decode_page`] does.

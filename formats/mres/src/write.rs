@@ -1,7 +1,8 @@
 //! Writer: a logical [`Dag`] to `.mres` bytes (FORMAT.md). Deterministic: the same `Dag`
 //! always gives the same bytes.
 
-use super::bits::{bits_for, oct_encode, BitWriter};
+use super::bits::{bits_for, oct_encode, read_bits, BitWriter};
+use super::codec::{self, first_use_order, Quantized};
 use super::records::{meta_checksum, ClusterHeader, ClusterRecord, GroupRecord, HeaderRecord, PageRecord};
 use super::*;
 use rayon::prelude::*;
@@ -58,7 +59,7 @@ pub fn write_encoded(
 
     // The pages, straight into the file after room for the header, hierarchy and table.
     let mut out = vec![0u8; (page_table_offset + page_table_size) as usize];
-    let frames = compress_pages(&layout, &pages, encoded, level, &mut out)?;
+    let frames = compress_pages(header, &layout, &pages, encoded, level, &mut out)?;
     let table = encode_page_table(&pages, &dependencies, &frames);
 
     let sizes = [groups.len(), clusters.len(), pages.len()].map(|n| n as u32);
@@ -168,6 +169,7 @@ struct Frame {
 /// Compresses the pages in parallel batches, appending each to `out` in page order and freeing
 /// its clusters' data once written.
 fn compress_pages(
+    header: &Header,
     layout: &Layout,
     pages: &[PageSpan],
     mut encoded: Vec<EncodedCluster>,
@@ -181,7 +183,7 @@ fn compress_pages(
             .par_iter()
             .map(|page| {
                 let clusters: Vec<&EncodedCluster> = members(page).iter().map(|&c| &encoded[c]).collect();
-                compress_page(&clusters, level)
+                compress_page(&clusters, header, level)
             })
             .collect::<Result<_, _>>()?;
         for frame in compressed {
@@ -289,21 +291,55 @@ impl Layout {
     }
 }
 
-/// Compresses a page as one zstd frame per section (headers, then each block kind), so that
-/// each section gets its own entropy tables: in one frame, zstd's 128 KiB blocks would make
-/// the well-compressing indices share tables with the near-random bit-packed positions.
-/// The bit-packed positions and normals (sections 1 and 2) are near-random: they get zstd's
-/// fastest level, which compresses them as well as level 19 does.
-fn compress_page(clusters: &[&EncodedCluster], level: i32) -> std::io::Result<Vec<u8>> {
-    let (raw, sections) = assemble_page(clusters);
+/// Encodes a page (FORMAT.md §4.3) and compresses each of its streams as its own zstd frame,
+/// so that each gets its own entropy tables (the low bytes of residuals are near-random, the
+/// high ones nearly all zero). The encoding is decoded again and must give back the page's GPU
+/// layout byte for byte: a writer bug is an error here, never a file that reads differently.
+fn compress_page(clusters: &[&EncodedCluster], header: &Header, level: i32) -> Result<Vec<u8>, WriteError> {
+    let (raw, _) = assemble_page(clusters);
+    let quantized: Vec<Quantized> = clusters.iter().map(|c| c.quantized(header.flags)).collect();
+    let codec_bug = || WriteError::BadDag("the page encoding does not decode to the page (a writer bug)".into());
+    let streams = codec::encode_page(&quantized, header.flags).ok_or_else(codec_bug)?;
+    let encoded = streams.concat();
+    if encoded.len() > MAX_PAGE_ENCODED_SIZE {
+        return Err(WriteError::BadDag(format!(
+            "a page encodes to {} bytes, over the {MAX_PAGE_ENCODED_SIZE}-byte limit",
+            encoded.len()
+        )));
+    }
+    let records: Vec<ClusterInfo> = clusters
+        .iter()
+        .map(|c| ClusterInfo {
+            group: 0,
+            own_group: NO_GROUP,
+            vertex_count: c.header.vertex_count,
+            triangle_count: c.header.triangle_count,
+            page_offset: 0,
+        })
+        .collect();
+    let decoded = codec::decode_page(&encoded, &records, header.flags, header.normal_bits);
+    if decoded.map(|d| gpu_page(&d, header.flags)).ok() != Some(raw) {
+        return Err(codec_bug());
+    }
     let mut out = Vec::new();
-    for (section, w) in sections.windows(2).enumerate() {
-        if w[1] > w[0] {
-            let level = if section == 1 || section == 2 { 1 } else { level };
-            out.extend_from_slice(&zstd::bulk::compress(&raw[w[0]..w[1]], level)?);
-        }
+    for stream in streams.iter().filter(|s| !s.is_empty()) {
+        out.extend_from_slice(&zstd::bulk::compress(stream, level)?);
     }
     Ok(out)
+}
+
+/// The GPU layout (FORMAT.md §5) of a page of quantized clusters, laid out as the writer lays
+/// out every page: the page decoder rebuilds pages here.
+pub(crate) fn gpu_page(clusters: &[Quantized], flags: u32) -> Vec<u8> {
+    let encoded: Vec<EncodedCluster> = clusters
+        .iter()
+        .map(|q| {
+            let (header, blocks) = gpu_blocks(q, flags);
+            EncodedCluster::from_blocks(0, NO_GROUP, header, blocks)
+        })
+        .collect();
+    let refs: Vec<&EncodedCluster> = encoded.iter().collect();
+    assemble_page(&refs).0
 }
 
 /// One page's place: its clusters and groups (in the new order) and its decompressed size.
@@ -398,6 +434,11 @@ impl EncodedCluster {
     /// Encodes `c` for a file with `header`; `index` names the cluster in errors.
     pub fn new(c: &DagCluster, header: &Header, index: usize) -> Result<EncodedCluster, WriteError> {
         let (header_bytes, blocks) = encode_blocks(c, header, index)?;
+        Ok(EncodedCluster::from_blocks(c.group, c.own_group, header_bytes, blocks))
+    }
+
+    /// A cluster from its GPU-layout header and blocks.
+    fn from_blocks(group: u32, own_group: u32, header_bytes: ClusterHeader, blocks: Blocks) -> EncodedCluster {
         let mut data = Vec::new();
         let mut ends = [0u32; BLOCK_KINDS];
         let mut present = 0u8;
@@ -409,14 +450,7 @@ impl EncodedCluster {
             }
             ends[slot] = data.len() as u32;
         }
-        Ok(EncodedCluster {
-            group: c.group,
-            own_group: c.own_group,
-            header: header_bytes,
-            data: data.into(),
-            ends,
-            present,
-        })
+        EncodedCluster { group, own_group, header: header_bytes, data: data.into(), ends, present }
     }
 
     /// The block of kind `slot` (padded), if the cluster has one.
@@ -429,11 +463,72 @@ impl EncodedCluster {
     fn size(&self) -> usize {
         CLUSTER_HEADER_SIZE + self.data.len()
     }
+
+    /// The quantized values its blocks hold (the writer's own blocks: always well formed).
+    fn quantized(&self, flags: u32) -> Quantized {
+        let h = &self.header;
+        let (v, t) = (h.vertex_count as usize, h.triangle_count as usize);
+        let block = |slot: usize| self.block(slot).unwrap_or_default();
+        let positions = unpack(block(ClusterHeader::POSITIONS), h.position_bits.map(u32::from), v);
+        let indices = block(ClusterHeader::INDICES)[..3 * t].to_vec();
+        let marks_at = (3 * t).next_multiple_of(4) as u64 * 8;
+        let marks = (0..t as u64)
+            .map(|k| match h.edge_flags & ClusterHeader::OPEN_EDGES {
+                0 => 0,
+                _ => read_bits(block(ClusterHeader::INDICES), marks_at + 3 * k, 3).unwrap_or(0) as u8,
+            })
+            .collect();
+        let with = |flag: u32| flags & flag != 0;
+        let pairs = |bytes: &[u8], n: usize| -> Vec<[u16; 2]> {
+            bytes
+                .chunks_exact(4)
+                .take(n)
+                .map(|b| [u16::from_le_bytes([b[0], b[1]]), u16::from_le_bytes([b[2], b[3]])])
+                .collect()
+        };
+        Quantized {
+            positions: positions
+                .iter()
+                .map(|d| std::array::from_fn(|k| h.position_min[k].wrapping_add(d[k] as i32)))
+                .collect(),
+            normals: if with(FLAG_NORMALS) {
+                unpack(block(ClusterHeader::NORMALS), h.normal_bits.map(u32::from), v)
+                    .iter()
+                    .map(|d| std::array::from_fn(|k| h.normal_min[k].wrapping_add(d[k] as u16)))
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            uvs: if with(FLAG_UVS) { pairs(block(ClusterHeader::UVS), v) } else { Vec::new() },
+            indices,
+            materials: if with(FLAG_MATERIALS) {
+                block(ClusterHeader::MATERIALS)
+                    .chunks_exact(2)
+                    .take(t)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            marks,
+        }
+    }
 }
 
-/// Encodes one cluster: its header (block offsets filled in by [`assemble_page`]) and blocks.
+/// Encodes one cluster: its header (block offsets filled in by [`assemble_page`]) and blocks,
+/// with its vertices in first-use order (FORMAT.md §4.3).
 fn encode_blocks(c: &DagCluster, h: &Header, index: usize) -> Result<(ClusterHeader, Blocks), WriteError> {
-    let flags = h.flags;
+    check_cluster(c, h.flags, index)?;
+    let q = quantize(c, h).ok_or_else(|| WriteError::BadCluster {
+        cluster: index,
+        problem: "meshoptimizer's index codec does not give the triangles back".into(),
+    })?;
+    Ok(gpu_blocks(&q, h.flags))
+}
+
+/// A cluster's limits (FORMAT.md §3.2, §5): counts, indices in range, one value per vertex or
+/// triangle of each attribute the file carries.
+fn check_cluster(c: &DagCluster, flags: u32, index: usize) -> Result<(), WriteError> {
     let bad = |problem: String| WriteError::BadCluster { cluster: index, problem };
     let vertex_count = c.positions.len();
     let triangle_count = c.indices.len() / 3;
@@ -456,11 +551,46 @@ fn encode_blocks(c: &DagCluster, h: &Header, index: usize) -> Result<(ClusterHea
     {
         return Err(bad("attribute count does not match the vertex/triangle count".into()));
     }
+    Ok(())
+}
 
-    let (lo, bits, packed) = pack_ranges(c.positions.iter().map(|p| p.map(|v| v as i64)));
+/// A checked cluster's quantized values, its vertices reordered into first-use order and its
+/// triangles as the index codec gives them back (FORMAT.md §4.3).
+fn quantize(c: &DagCluster, h: &Header) -> Option<Quantized> {
+    let order = first_use_order(&c.indices, c.positions.len());
+    let mut new_index = vec![0u8; c.positions.len()];
+    for (new, &old) in order.iter().enumerate() {
+        new_index[old as usize] = new as u8;
+    }
+    let with = |flag: u32| h.flags & flag != 0;
+    let indices: Vec<u8> = c.indices.iter().map(|&i| new_index[i as usize]).collect();
+    let marks = if c.open_edges.is_empty() { vec![0; c.indices.len() / 3] } else { c.open_edges.clone() };
+    let (indices, marks) = codec::canonical_triangles(&indices, &marks, c.positions.len())?;
+    Some(Quantized {
+        positions: order.iter().map(|&o| c.positions[o as usize]).collect(),
+        normals: if with(FLAG_NORMALS) {
+            order.iter().map(|&o| oct_encode(c.normals[o as usize], h.normal_bits).map(|v| v as u16)).collect()
+        } else {
+            Vec::new()
+        },
+        uvs: if with(FLAG_UVS) {
+            order.iter().map(|&o| h.uv.quantize(c.uvs[o as usize])).collect()
+        } else {
+            Vec::new()
+        },
+        indices,
+        materials: if with(FLAG_MATERIALS) { c.materials.clone() } else { Vec::new() },
+        marks,
+    })
+}
+
+/// The GPU-layout header (block offsets left zero) and blocks of a quantized cluster
+/// (FORMAT.md §5): the writer and the page decoder both lay clusters out here.
+pub(crate) fn gpu_blocks(q: &Quantized, flags: u32) -> (ClusterHeader, Blocks) {
+    let (lo, bits, packed) = pack_ranges(q.positions.iter().map(|p| p.map(|v| v as i64)));
     let mut header = ClusterHeader {
-        vertex_count: vertex_count as u16,
-        triangle_count: triangle_count as u16,
+        vertex_count: q.positions.len() as u16,
+        triangle_count: (q.indices.len() / 3) as u16,
         position_min: lo.map(|v| v as i32),
         position_bits: bits.map(|b| b as u8),
         block_offsets: [0; BLOCK_KINDS],
@@ -471,31 +601,30 @@ fn encode_blocks(c: &DagCluster, h: &Header, index: usize) -> Result<(ClusterHea
     let mut blocks: Blocks = Default::default();
     blocks[ClusterHeader::POSITIONS] = Some(packed);
     if flags & FLAG_NORMALS != 0 {
-        let (lo, bits, packed) = pack_ranges(c.normals.iter().map(|n| oct_encode(*n, h.normal_bits).map(|v| v as i64)));
+        let (lo, bits, packed) = pack_ranges(q.normals.iter().map(|n| n.map(|v| v as i64)));
         header.normal_min = lo.map(|v| v as u16);
         header.normal_bits = bits.map(|b| b as u8);
         blocks[ClusterHeader::NORMALS] = Some(packed);
     }
     if flags & FLAG_UVS != 0 {
-        blocks[ClusterHeader::UVS] =
-            Some(c.uvs.iter().flat_map(|uv| h.uv.quantize(*uv)).flat_map(u16::to_le_bytes).collect());
+        blocks[ClusterHeader::UVS] = Some(q.uvs.iter().flatten().flat_map(|v| v.to_le_bytes()).collect());
     }
-    blocks[ClusterHeader::INDICES] = Some(indices_block(c, &mut header));
+    blocks[ClusterHeader::INDICES] = Some(indices_block(&q.indices, &q.marks, &mut header));
     if flags & FLAG_MATERIALS != 0 {
-        blocks[ClusterHeader::MATERIALS] = Some(c.materials.iter().flat_map(|m| m.to_le_bytes()).collect());
+        blocks[ClusterHeader::MATERIALS] = Some(q.materials.iter().flat_map(|m| m.to_le_bytes()).collect());
     }
-    Ok((header, blocks))
+    (header, blocks)
 }
 
 /// The indices block: the local indices, followed (after padding to 4 bytes) by the open-edge
 /// block when any edge is marked, which `edge_flags` then announces (FORMAT.md §5.7). The marks sit right after the indices, so they need no offset field of their own.
-fn indices_block(c: &DagCluster, header: &mut ClusterHeader) -> Vec<u8> {
-    let mut block = c.indices.clone();
-    if c.open_edges.iter().any(|&m| m != 0) {
+fn indices_block(indices: &[u8], marks: &[u8], header: &mut ClusterHeader) -> Vec<u8> {
+    let mut block = indices.to_vec();
+    if marks.iter().any(|&m| m != 0) {
         header.edge_flags |= ClusterHeader::OPEN_EDGES;
         block.resize(block.len().next_multiple_of(4), 0);
         let mut bits = BitWriter::default();
-        for &m in &c.open_edges {
+        for &m in marks {
             bits.push(m as u32, 3);
         }
         block.extend(words_to_bytes(&bits.finish()));
@@ -515,13 +644,29 @@ fn pack_ranges<const N: usize>(values: impl Iterator<Item = [i64; N]> + Clone) -
         }
     }
     let bits: [u32; N] = std::array::from_fn(|k| bits_for((hi[k] - lo[k]) as u32));
-    let mut w = BitWriter::default();
+    let count = values.clone().count() as u64;
+    let mut w = BitWriter::with_capacity(count * bits.iter().map(|&b| b as u64).sum::<u64>());
     for v in values {
         for k in 0..N {
             w.push((v[k] - lo[k]) as u32, bits[k]);
         }
     }
     (lo, bits, words_to_bytes(&w.finish()))
+}
+
+/// `count` records of bit-packed fields of the given widths (FORMAT.md §5.2).
+fn unpack<const N: usize>(bytes: &[u8], widths: [u32; N], count: usize) -> Vec<[u32; N]> {
+    let stride: u64 = widths.iter().map(|&w| w as u64).sum();
+    (0..count as u64)
+        .map(|v| {
+            let mut at = v * stride;
+            std::array::from_fn(|k| {
+                let value = read_bits(bytes, at, widths[k]).unwrap_or(0);
+                at += widths[k] as u64;
+                value
+            })
+        })
+        .collect()
 }
 
 fn words_to_bytes(words: &[u32]) -> Vec<u8> {

@@ -25,7 +25,9 @@ fn round_trip_is_exact() {
     for (i, d) in decoded.iter().enumerate() {
         let c = &dag.clusters[order[i]];
         assert_eq!(d.positions, c.positions);
-        assert_eq!(d.indices, c.indices);
+        // The same triangles in the same order with the same marked edges; a triangle's corners
+        // may be rotated (docs/FORMAT.md §4.3).
+        assert_eq!(triangles(&d.indices, &d.open_edges), triangles(&c.indices, &c.open_edges));
         assert_eq!(d.materials, c.materials);
         assert_eq!(d.uvs, c.uvs);
         assert_eq!(d.normals, c.normals);
@@ -37,6 +39,21 @@ fn round_trip_is_exact() {
         clusters: decoded.into_iter().zip(&file.clusters).map(|(d, info)| DagCluster::from_decoded(d, info)).collect(),
     };
     assert_eq!(write_mres(&again, 3).unwrap(), bytes);
+}
+
+/// Each triangle with its open-edge marks, rotated so that its smallest index comes first
+/// (bit k of a mark is the edge from corner k to k + 1, so it rotates with the corners).
+fn triangles(indices: &[u8], marks: &[u8]) -> Vec<([u8; 3], u8)> {
+    indices
+        .chunks_exact(3)
+        .zip(marks)
+        .map(|(t, &m)| {
+            let r = (0..3).min_by_key(|&k| t[k]).unwrap();
+            let corners = [t[r], t[(r + 1) % 3], t[(r + 2) % 3]];
+            let mark = (0..3).fold(0, |acc, k| acc | ((m >> ((k + r) % 3)) & 1) << k);
+            (corners, mark)
+        })
+        .collect()
 }
 
 fn parse_and_decode(bytes: Vec<u8>) -> Result<(), MresError> {
@@ -72,6 +89,10 @@ fn typed_errors() {
     let mut v = bytes.clone();
     v[4] = 1; // version 1 had no open-edge marks
     assert_eq!(MresFile::parse(v).unwrap_err(), MresError::WrongVersion { found: 1 });
+    // Version 2 stored the GPU layout itself (docs/FORMAT.md §8): refused, never misread.
+    let mut v = bytes.clone();
+    v[4] = 2;
+    assert_eq!(MresFile::parse(v).unwrap_err(), MresError::WrongVersion { found: 2 });
     let mut v = bytes.clone();
     v[0] = b'X';
     assert_eq!(MresFile::parse(v).unwrap_err(), MresError::BadMagic);
@@ -260,4 +281,55 @@ fn the_file_length_must_match_the_page_table() {
     assert_eq!(MresIndex::parse(&longer).unwrap().file_size(), bytes.len() as u64);
     let short = bytes[..bytes.len() - 1].to_vec();
     assert!(matches!(MresFile::parse(short), Err(MresError::Truncated { ref what, .. }) if what.starts_with("page")));
+}
+
+/// `bytes` (a one-page file) with its page's encoded bytes (docs/FORMAT.md §4.3) replaced by
+/// `encoded`, compressed and checksummed again, and the meta checksum fixed: a file whose only
+/// fault, if any, is in the encoding.
+fn with_encoded_page(bytes: &[u8], encoded: &[u8]) -> Vec<u8> {
+    use mres_format::records::{meta_checksum, PageRecord};
+    let file = MresFile::parse(bytes.to_vec()).unwrap();
+    assert_eq!(file.pages.len(), 1, "the sample is one page");
+    let start = file.pages[0].offset as usize;
+    let frame = zstd::bulk::compress(encoded, 1).unwrap();
+    let mut out = bytes[..start].to_vec();
+    out.extend_from_slice(&frame);
+    let rec = start - mres_format::PAGE_RECORD_SIZE;
+    out[rec + PageRecord::COMPRESSED_SIZE..][..4].copy_from_slice(&(frame.len() as u32).to_le_bytes());
+    out[rec + PageRecord::CHECKSUM..][..32].copy_from_slice(blake3::hash(&frame).as_bytes());
+    let head: [u8; HEADER_SIZE] = out[..HEADER_SIZE].try_into().unwrap();
+    let table = HEADER_SIZE + file.groups.len() * 40 + file.clusters.len() * 16;
+    let sum = meta_checksum(&head, &out[HEADER_SIZE..table], &out[table..start]);
+    out[112..144].copy_from_slice(&sum);
+    out
+}
+
+/// Past the checksums: every truncation of a page's encoded bytes is an error, and no flipped
+/// byte panics; flipped preamble and index-length bytes are errors (they change the length the
+/// page needs), and so are flipped bytes anywhere once the encoding is one byte too long.
+#[test]
+fn corrupt_page_encodings_are_errors_not_panics() {
+    let bytes = write_mres(&sample_dag(), 3).unwrap();
+    let file = MresFile::parse(bytes.clone()).unwrap();
+    let info = &file.pages[0];
+    let frame = &bytes[info.offset as usize..][..info.compressed_size as usize];
+    let encoded = zstd::stream::decode_all(frame).unwrap();
+    assert!(parse_and_decode(with_encoded_page(&bytes, &encoded)).is_ok(), "resealing alone breaks nothing");
+    for len in 0..encoded.len() {
+        assert!(parse_and_decode(with_encoded_page(&bytes, &encoded[..len])).is_err(), "encoding cut to {len} bytes");
+    }
+    let mut longer = encoded.clone();
+    longer.push(0);
+    assert!(parse_and_decode(with_encoded_page(&bytes, &longer)).is_err());
+    let length_bytes = 4 + 2 * info.cluster_count as usize;
+    for at in 0..encoded.len() {
+        for mask in [0x01u8, 0x80, 0xff] {
+            let mut flipped = encoded.clone();
+            flipped[at] ^= mask;
+            let result = parse_and_decode(with_encoded_page(&bytes, &flipped));
+            if at < length_bytes {
+                assert!(result.is_err(), "flipping preamble/length byte {at} with {mask:#x} was accepted");
+            }
+        }
+    }
 }

@@ -613,7 +613,11 @@ fn print_bench(a: &BenchArgs, r: &Report) {
             r.level0_fill,
             r.level0_triangles,
             if r.bytes > 0 {
-                format!("  file {:.2} B/input tri", r.bytes as f64 / r.input_triangles.max(1) as f64)
+                format!(
+                    "  file {:.2} B/input tri, pages decode at {:.0} MB/s of GPU layout (1 thread)",
+                    r.bytes as f64 / r.input_triangles.max(1) as f64,
+                    r.decode_mb_per_s
+                )
             } else {
                 String::new()
             }

@@ -1,0 +1,580 @@
+//! The page encoding on disk (FORMAT.md §4.3): a page's clusters as prediction residuals in
+//! byte planes, which zstd then compresses, instead of the bit-packed GPU layout (§5) that
+//! zstd cannot shrink. Decoding gives back the quantized values exactly; the GPU layout is
+//! then rebuilt from them ([`crate::write`] lays it out, for the writer and the reader alike).
+//!
+//! Indices are meshoptimizer's index codec (format version 1, `encode_index_buffer`), which
+//! codes each triangle against the edges and vertices of the triangles before it and keeps
+//! their order (it may rotate a triangle's corners: the writer stores triangles as the codec
+//! gives them back, with their open-edge marks rotated to match). Attributes are hand-written:
+//! meshoptimizer's vertex codec codes each vertex against the one before it in the buffer,
+//! byte by byte, while predicting across an edge of the triangles already decoded
+//! (parallelogram) halves the residuals on smooth surfaces; the figures that chose this are in
+//! docs/BENCHMARKS.md ("Page encoding").
+//!
+//! Vertices are predicted in the order the triangles first use them (the writer also numbers
+//! them so, which helps the index codec): across an edge of an earlier triangle, from a
+//! vertex of the same triangle, or from the previous vertex.
+
+use super::*;
+
+/// One cluster's attributes as quantized integers: what the GPU layout stores (FORMAT.md §5).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Quantized {
+    /// Grid coordinates, one per vertex.
+    pub positions: Vec<[i32; 3]>,
+    /// Octahedral values, one pair per vertex (with `NORMALS`).
+    pub normals: Vec<[u16; 2]>,
+    /// Quantized UVs, one pair per vertex (with `UVS`).
+    pub uvs: Vec<[u16; 2]>,
+    /// Local indices, three per triangle.
+    pub indices: Vec<u8>,
+    /// Material per triangle (with `MATERIALS`).
+    pub materials: Vec<u16>,
+    /// Open-edge marks, one 3-bit mask per triangle (always one per triangle).
+    pub marks: Vec<u8>,
+}
+
+/// How a vertex is predicted from the vertices decoded before it (FORMAT.md §4.3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Predictor {
+    /// `a + b − d`: across the edge (a, b) from the last earlier triangle that used it.
+    Parallelogram(u8, u8, u8),
+    /// A vertex decoded before: one of the same triangle, or the previous one.
+    Neighbour(u8),
+    /// The cluster's first vertex: from the previous cluster's first, or zero.
+    Anchor,
+}
+
+/// Why a page's encoded bytes do not decode.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Invalid(pub String);
+
+fn invalid<T>(what: impl Into<String>) -> Result<T, Invalid> {
+    Err(Invalid(what.into()))
+}
+
+/// The permutation that puts a cluster's vertices in first-use order: `order[new] = old`.
+/// Vertices no triangle uses keep their relative order, after the used ones.
+pub(crate) fn first_use_order(indices: &[u8], vertex_count: usize) -> Vec<u8> {
+    let mut seen = vec![false; vertex_count];
+    let mut order = Vec::with_capacity(vertex_count);
+    let all = (0..vertex_count).map(|v| v as u8);
+    for i in indices.iter().copied().chain(all) {
+        if let Some(s) = seen.get_mut(i as usize).filter(|s| !**s) {
+            *s = true;
+            order.push(i);
+        }
+    }
+    order
+}
+
+/// Edges of the triangles seen so far → the vertex opposite the edge in the last triangle
+/// that used it: a direct table over every pair of 8-bit indices, with a stamp per entry so
+/// that clearing it per cluster is one increment (decoding then allocates nothing per cluster
+/// and a lookup is one load, where a hash table cost a quarter of the decoding time).
+struct EdgeTable {
+    stamp: Vec<u16>,
+    opposite: Vec<u8>,
+    current: u16,
+}
+
+impl EdgeTable {
+    fn new() -> EdgeTable {
+        EdgeTable { stamp: vec![0; 1 << 16], opposite: vec![0; 1 << 16], current: 1 }
+    }
+
+    /// Forgets every edge.
+    fn clear(&mut self) {
+        self.current = self.current.wrapping_add(1);
+        if self.current == 0 {
+            self.stamp.fill(0);
+            self.current = 1;
+        }
+    }
+
+    fn key(a: u8, b: u8) -> usize {
+        (a.min(b) as usize) << 8 | a.max(b) as usize
+    }
+
+    fn insert(&mut self, a: u8, b: u8, opposite: u8) {
+        let k = Self::key(a, b);
+        self.stamp[k] = self.current;
+        self.opposite[k] = opposite;
+    }
+
+    fn get(&self, a: u8, b: u8) -> Option<u8> {
+        let k = Self::key(a, b);
+        (self.stamp[k] == self.current).then(|| self.opposite[k])
+    }
+}
+
+/// Each vertex of a cluster with its predictor, in decoding order: the order in which the
+/// triangles first use them, then the vertices no triangle uses in index order (FORMAT.md
+/// §4.3). Computed from the indices alone: the decoder knows them before any attribute.
+fn predictors(indices: &[u8], vertex_count: usize, edges: &mut EdgeTable) -> Vec<(u8, Predictor)> {
+    edges.clear();
+    let mut seen = [false; MAX_CLUSTER_VERTICES];
+    let mut out: Vec<(u8, Predictor)> = Vec::with_capacity(vertex_count);
+    let previous = |out: &[(u8, Predictor)]| out.last().map_or(Predictor::Anchor, |&(p, _)| Predictor::Neighbour(p));
+    for t in indices.chunks_exact(3) {
+        for k in 0..3 {
+            let v = t[k];
+            if seen[v as usize] {
+                continue;
+            }
+            let (a, b) = (t[(k + 1) % 3], t[(k + 2) % 3]);
+            let pred = match (seen[a as usize], seen[b as usize]) {
+                (true, true) => edges.get(a, b).map_or(Predictor::Neighbour(a), |d| Predictor::Parallelogram(a, b, d)),
+                (true, false) => Predictor::Neighbour(a),
+                (false, true) => Predictor::Neighbour(b),
+                (false, false) => previous(&out),
+            };
+            seen[v as usize] = true;
+            out.push((v, pred));
+        }
+        for k in 0..3 {
+            edges.insert(t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
+        }
+    }
+    for (v, _) in seen.iter().enumerate().take(vertex_count).filter(|(_, &s)| !s) {
+        let pred = previous(&out);
+        out.push((v as u8, pred));
+    }
+    out
+}
+
+/// Integer vectors the predictors work on: wrapping arithmetic, so that every residual of every
+/// value is defined and decoding never overflows.
+trait Lanes: Copy + Default {
+    fn add(self, o: Self) -> Self;
+    fn sub(self, o: Self) -> Self;
+}
+
+impl Lanes for [i32; 3] {
+    fn add(self, o: Self) -> Self {
+        std::array::from_fn(|k| self[k].wrapping_add(o[k]))
+    }
+    fn sub(self, o: Self) -> Self {
+        std::array::from_fn(|k| self[k].wrapping_sub(o[k]))
+    }
+}
+
+impl Lanes for [u16; 2] {
+    fn add(self, o: Self) -> Self {
+        std::array::from_fn(|k| self[k].wrapping_add(o[k]))
+    }
+    fn sub(self, o: Self) -> Self {
+        std::array::from_fn(|k| self[k].wrapping_sub(o[k]))
+    }
+}
+
+/// The predicted value from the values decoded so far; `anchor` is the previous cluster's
+/// first vertex (zero for the page's first cluster).
+fn predict<T: Lanes>(p: Predictor, values: &[T], anchor: T) -> T {
+    let at = |i: u8| values.get(i as usize).copied().unwrap_or_default();
+    match p {
+        Predictor::Parallelogram(a, b, d) => at(a).add(at(b)).sub(at(d)),
+        Predictor::Neighbour(a) => at(a),
+        Predictor::Anchor => anchor,
+    }
+}
+
+fn zigzag32(r: i32) -> u32 {
+    ((r << 1) ^ (r >> 31)) as u32
+}
+
+fn unzigzag32(z: u32) -> i32 {
+    ((z >> 1) as i32) ^ -((z & 1) as i32)
+}
+
+fn zigzag16(r: u16) -> u16 {
+    let r = r as i16;
+    ((r << 1) ^ (r >> 15)) as u16
+}
+
+fn unzigzag16(z: u16) -> u16 {
+    ((z >> 1) as i16 ^ -((z & 1) as i16)) as u16
+}
+
+/// Size of the page preamble: the position plane count, then three zero bytes.
+const PREAMBLE: usize = 4;
+
+/// The most bytes meshoptimizer's index codec writes for `triangles` triangles of a cluster
+/// (`meshopt_encodeIndexBufferBound` for at most 256 vertices: a header byte, at most 8 bytes
+/// per triangle, a 16-byte table).
+pub(crate) fn index_bound(triangles: usize) -> usize {
+    17 + 8 * triangles
+}
+
+/// Vertex and triangle totals of a page's clusters, from their records.
+pub(crate) fn totals(records: &[ClusterInfo]) -> (usize, usize) {
+    let v = records.iter().map(|c| c.vertex_count as usize).sum();
+    let t = records.iter().map(|c| c.triangle_count as usize).sum();
+    (v, t)
+}
+
+/// Length of a page's encoded bytes with `index_bytes` bytes of coded indices and `planes`
+/// position byte planes (FORMAT.md §4.3).
+pub(crate) fn encoded_len(
+    flags: u32,
+    clusters: usize,
+    (v, t): (usize, usize),
+    index_bytes: usize,
+    planes: usize,
+) -> usize {
+    let with = |flag: u32, n: usize| if flags & flag != 0 { n } else { 0 };
+    PREAMBLE
+        + 2 * clusters
+        + index_bytes
+        + t
+        + planes * 3 * v
+        + with(FLAG_NORMALS, 4 * v)
+        + with(FLAG_UVS, 4 * v)
+        + with(FLAG_MATERIALS, 2 * t)
+}
+
+/// The most bytes a page of these clusters can encode to.
+pub(crate) fn max_encoded_len(flags: u32, records: &[ClusterInfo]) -> usize {
+    let (v, t) = totals(records);
+    let index_bytes = records.iter().map(|r| index_bound(r.triangle_count as usize)).sum();
+    encoded_len(flags, records.len(), (v, t), index_bytes, 4)
+}
+
+/// A cluster's triangles as meshoptimizer's index codec gives them back (the same triangles
+/// in the same order, some with their corners rotated), with the open-edge marks rotated to
+/// match: the form the writer stores, so that the page decodes to what was written.
+/// `None` if the codec fails or does not settle (then the cluster cannot be written).
+pub(crate) fn canonical_triangles(indices: &[u8], marks: &[u8], vertex_count: usize) -> Option<(Vec<u8>, Vec<u8>)> {
+    let mut current: Vec<u32> = indices.iter().map(|&i| i as u32).collect();
+    for _ in 0..4 {
+        let encoded = meshopt::encode_index_buffer(&current, vertex_count).ok()?;
+        let decoded: Vec<u32> = meshopt::decode_index_buffer(&encoded, current.len()).ok()?;
+        if decoded == current {
+            let marks = rotate_marks(indices, marks, &current)?;
+            return Some((current.iter().map(|&i| i as u8).collect(), marks));
+        }
+        current = decoded;
+    }
+    None
+}
+
+/// The marks of `original`'s triangles for the same triangles rotated as in `rotated`: bit k
+/// of a mark is the edge from corner k to corner k + 1, so it moves with the corners.
+fn rotate_marks(original: &[u8], marks: &[u8], rotated: &[u32]) -> Option<Vec<u8>> {
+    original
+        .chunks_exact(3)
+        .zip(rotated.chunks_exact(3))
+        .zip(marks)
+        .map(|((o, r), &m)| {
+            let shift = (0..3).find(|&s| (0..3).all(|k| r[k] == o[(k + s) % 3] as u32))?;
+            Some((0..3).fold(0u8, |acc, k| acc | ((m >> ((k + shift) % 3)) & 1) << k))
+        })
+        .collect()
+}
+
+/// The encoded page as separate streams (preamble, index lengths, coded indices, marks, then
+/// each byte plane of each attribute), which the writer compresses one zstd frame each so
+/// that each gets its own entropy tables; their concatenation is the encoded page. `None` if
+/// the index codec fails.
+pub(crate) fn encode_page(clusters: &[Quantized], flags: u32) -> Option<Vec<Vec<u8>>> {
+    let mut edges = EdgeTable::new();
+    let (mut lengths, mut coded, mut marks) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut pos, mut nrm, mut uvs) = (Vec::new(), Vec::new(), Vec::new());
+    let mut materials = Vec::new();
+    let mut anchors = (<[i32; 3]>::default(), <[u16; 2]>::default(), <[u16; 2]>::default());
+    for c in clusters {
+        let vertex_count = c.positions.len();
+        let wide: Vec<u32> = c.indices.iter().map(|&i| i as u32).collect();
+        let code = meshopt::encode_index_buffer(&wide, vertex_count).ok()?;
+        lengths.extend_from_slice(&(u16::try_from(code.len()).ok()?).to_le_bytes());
+        coded.extend_from_slice(&code);
+        marks.extend_from_slice(&c.marks);
+        let preds = predictors(&c.indices, vertex_count, &mut edges);
+        let first = preds[0].0 as usize;
+        residuals(&preds, &c.positions, anchors.0, |r| pos.push(r.map(zigzag32)));
+        anchors.0 = c.positions[first];
+        if flags & FLAG_NORMALS != 0 {
+            residuals(&preds, &c.normals, anchors.1, |r| nrm.push(r.map(zigzag16)));
+            anchors.1 = c.normals[first];
+        }
+        if flags & FLAG_UVS != 0 {
+            residuals(&preds, &c.uvs, anchors.2, |r| uvs.push(r.map(zigzag16)));
+            anchors.2 = c.uvs[first];
+        }
+        materials.extend_from_slice(&c.materials);
+    }
+    let widest = pos.iter().flatten().map(|&z| 4 - z.leading_zeros() as usize / 8).max().unwrap_or(0);
+    let planes = widest.max(1);
+    let mut streams = vec![vec![planes as u8, 0, 0, 0], lengths, coded, marks];
+    streams.extend((0..planes).map(|p| pos.iter().flatten().map(|&z| (z >> (8 * p)) as u8).collect()));
+    for (flag, values) in [(FLAG_NORMALS, &nrm), (FLAG_UVS, &uvs)] {
+        if flags & flag != 0 {
+            streams.extend((0..2).map(|p| values.iter().flatten().map(|&z| (z >> (8 * p)) as u8).collect()));
+        }
+    }
+    if flags & FLAG_MATERIALS != 0 {
+        streams.extend((0..2).map(|p| materials.iter().map(|&m| (m >> (8 * p)) as u8).collect()));
+    }
+    Some(streams)
+}
+
+/// Feeds the residual of each vertex (value − prediction) to `out`, in decoding order.
+fn residuals<T: Lanes>(preds: &[(u8, Predictor)], values: &[T], anchor: T, mut out: impl FnMut(T)) {
+    for &(v, p) in preds {
+        out(values[v as usize].sub(predict(p, values, anchor)));
+    }
+}
+
+/// A reader over the encoded page's sections, each a byte slice taken in turn.
+struct Sections<'a> {
+    rest: &'a [u8],
+}
+
+impl<'a> Sections<'a> {
+    fn take(&mut self, len: usize) -> Result<&'a [u8], Invalid> {
+        if len > self.rest.len() {
+            return invalid("encoded page ends early");
+        }
+        let (head, rest) = self.rest.split_at(len);
+        self.rest = rest;
+        Ok(head)
+    }
+
+    /// `count` values of `N` lanes of `planes` bytes each (plane-major), as u32 lanes.
+    fn planes<const N: usize>(&mut self, count: usize, planes: usize) -> Result<Vec<[u32; N]>, Invalid> {
+        let mut values = vec![[0u32; N]; count];
+        for p in 0..planes {
+            let bytes = self.take(count * N)?;
+            for (value, lanes) in values.iter_mut().zip(bytes.chunks_exact(N)) {
+                for k in 0..N {
+                    value[k] |= (lanes[k] as u32) << (8 * p);
+                }
+            }
+        }
+        Ok(values)
+    }
+}
+
+/// Decodes a page's encoded bytes (FORMAT.md §4.3) into its clusters' quantized values;
+/// `records` are the page's cluster records. Every index, octahedral value and mark is
+/// checked against its range; the lengths must match the counts exactly.
+pub(crate) fn decode_page(
+    bytes: &[u8],
+    records: &[ClusterInfo],
+    flags: u32,
+    normal_bits: u32,
+) -> Result<Vec<Quantized>, Invalid> {
+    let (v_total, t_total) = totals(records);
+    let mut s = Sections { rest: bytes };
+    let preamble = s.take(PREAMBLE)?;
+    let planes = preamble[0] as usize;
+    if !(1..=4).contains(&planes) || preamble[1..] != [0, 0, 0] {
+        return invalid("preamble: plane count outside 1..=4 or reserved bytes not zero");
+    }
+    let lengths: Vec<usize> =
+        s.take(2 * records.len())?.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]]) as usize).collect();
+    let index_bytes: usize = lengths.iter().sum();
+    let expected = encoded_len(flags, records.len(), (v_total, t_total), index_bytes, planes);
+    if bytes.len() != expected {
+        return invalid(format!("{} encoded bytes, its counts and lengths need {expected}", bytes.len()));
+    }
+    let coded = s.take(index_bytes)?;
+    let marks = s.take(t_total)?;
+    if let Some(m) = marks.iter().find(|&&m| m > 7) {
+        return invalid(format!("open-edge mark {m} has bits above bit 2"));
+    }
+    let pos = s.planes::<3>(v_total, planes)?;
+    let with = |flag: u32| flags & flag != 0;
+    let nrm = if with(FLAG_NORMALS) { s.planes::<2>(v_total, 2)? } else { Vec::new() };
+    let uvs = if with(FLAG_UVS) { s.planes::<2>(v_total, 2)? } else { Vec::new() };
+    let materials = if with(FLAG_MATERIALS) { s.planes::<1>(t_total, 2)? } else { Vec::new() };
+
+    let mut edges = EdgeTable::new();
+    let mut out = Vec::with_capacity(records.len());
+    let (mut vo, mut to, mut io) = (0usize, 0usize, 0usize);
+    let mut anchors = (<[i32; 3]>::default(), <[u16; 2]>::default(), <[u16; 2]>::default());
+    let max_normal = ((1u32 << normal_bits.min(16)) - 1) as u16;
+    for (r, &len) in records.iter().zip(&lengths) {
+        let (vc, tc) = (r.vertex_count as usize, r.triangle_count as usize);
+        let indices = decode_indices(&coded[io..io + len], vc, tc)?;
+        let preds = predictors(&indices, vc, &mut edges);
+        let first = preds[0].0 as usize;
+        let mut q = Quantized { indices, marks: marks[to..to + tc].to_vec(), ..Quantized::default() };
+        q.positions = rebuild(&preds, &pos[vo..vo + vc], anchors.0, |z| z.map(unzigzag32));
+        anchors.0 = q.positions[first];
+        let half = |z: [u32; 2]| z.map(|x| unzigzag16(x as u16));
+        if with(FLAG_NORMALS) {
+            q.normals = rebuild(&preds, &nrm[vo..vo + vc], anchors.1, half);
+            if q.normals.iter().flatten().any(|&n| n > max_normal) {
+                return invalid(format!("octahedral value above {max_normal}"));
+            }
+            anchors.1 = q.normals[first];
+        }
+        if with(FLAG_UVS) {
+            q.uvs = rebuild(&preds, &uvs[vo..vo + vc], anchors.2, half);
+            anchors.2 = q.uvs[first];
+        }
+        if with(FLAG_MATERIALS) {
+            q.materials = materials[to..to + tc].iter().map(|m| m[0] as u16).collect();
+        }
+        out.push(q);
+        (vo, to, io) = (vo + vc, to + tc, io + len);
+    }
+    Ok(out)
+}
+
+/// Values from residuals, in decoding order: each vertex is its prediction plus its residual.
+fn rebuild<T: Lanes, Z: Copy>(preds: &[(u8, Predictor)], residuals: &[Z], anchor: T, un: impl Fn(Z) -> T) -> Vec<T> {
+    let mut values: Vec<T> = vec![T::default(); preds.len()];
+    for (&(v, p), &z) in preds.iter().zip(residuals) {
+        values[v as usize] = predict(p, &values, anchor).add(un(z));
+    }
+    values
+}
+
+/// A cluster's local indices from meshoptimizer's index codec, each checked to name a vertex
+/// of the cluster.
+fn decode_indices(coded: &[u8], vertex_count: usize, triangle_count: usize) -> Result<Vec<u8>, Invalid> {
+    if coded.len() > index_bound(triangle_count) {
+        return invalid(format!("{} bytes of coded indices for {triangle_count} triangles", coded.len()));
+    }
+    let wide: Vec<u32> =
+        meshopt::decode_index_buffer(coded, 3 * triangle_count).map_err(|e| Invalid(format!("index codec: {e}")))?;
+    if let Some(i) = wide.iter().find(|&&i| i as usize >= vertex_count) {
+        return invalid(format!("local index {i} out of {vertex_count} vertices"));
+    }
+    Ok(wide.iter().map(|&i| i as u8).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(vertex_count: u16, triangle_count: u16) -> ClusterInfo {
+        ClusterInfo { group: 0, own_group: NO_GROUP, vertex_count, triangle_count, page_offset: 0 }
+    }
+
+    /// A strip of `n` vertices with every attribute, including extreme values that wrap, in
+    /// the form the writer stores (triangles as the index codec gives them back).
+    fn sample(n: usize, seed: i32) -> Quantized {
+        let positions: Vec<[i32; 3]> = (0..n as i32)
+            .map(|i| [i * 37 + seed, i32::MAX - i * i, if i % 5 == 0 { i32::MIN } else { i * 3 }])
+            .collect();
+        let mut indices = vec![0, 1, 2];
+        for v in 3..n.min(130) as u8 {
+            indices.extend_from_slice(&[v - 1, v - 2, v]);
+        }
+        // The vertices past the strip are used by no triangle.
+        let t = indices.len() / 3;
+        let marks: Vec<u8> = (0..t).map(|t| (t % 8) as u8).collect();
+        let (indices, marks) = canonical_triangles(&indices, &marks, n).unwrap();
+        Quantized {
+            normals: (0..n).map(|i| [(i * 31 % 1024) as u16, 1023 - (i % 1024) as u16]).collect(),
+            uvs: (0..n).map(|i| [u16::MAX - i as u16, (i * 977) as u16]).collect(),
+            positions,
+            indices,
+            materials: (0..t).map(|t| (t / 7) as u16 * 1000).collect(),
+            marks,
+        }
+    }
+
+    fn records(clusters: &[Quantized]) -> Vec<ClusterInfo> {
+        clusters.iter().map(|c| record(c.positions.len() as u16, c.marks.len() as u16)).collect()
+    }
+
+    #[test]
+    fn pages_round_trip_exactly() {
+        let clusters = vec![sample(3, 5), sample(256, -7), sample(40, 1 << 30)];
+        let flags = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS;
+        let bytes: Vec<u8> = encode_page(&clusters, flags).unwrap().concat();
+        assert_eq!(decode_page(&bytes, &records(&clusters), flags, 10), Ok(clusters.clone()));
+        // A normal above the header's range is refused.
+        assert!(decode_page(&bytes, &records(&clusters), flags, 9).is_err());
+        // Without attributes, only positions, indices and marks are stored.
+        let bare: Vec<Quantized> = clusters
+            .iter()
+            .map(|c| Quantized { normals: vec![], uvs: vec![], materials: vec![], ..c.clone() })
+            .collect();
+        let bytes: Vec<u8> = encode_page(&bare, 0).unwrap().concat();
+        assert_eq!(decode_page(&bytes, &records(&bare), 0, 0), Ok(bare.clone()));
+        // One byte more or less is refused.
+        assert!(decode_page(&bytes[..bytes.len() - 1], &records(&bare), 0, 0).is_err());
+        assert!(decode_page(&[&bytes[..], &[0]].concat(), &records(&bare), 0, 0).is_err());
+    }
+
+    #[test]
+    fn coded_indices_are_checked() {
+        let c = sample(40, 0);
+        let wide: Vec<u32> = c.indices.iter().map(|&i| i as u32).collect();
+        let coded = meshopt::encode_index_buffer(&wide, 40).unwrap();
+        assert_eq!(decode_indices(&coded, 40, c.marks.len()).unwrap(), c.indices);
+        // Fewer vertices than the indices name.
+        assert!(decode_indices(&coded, 39, c.marks.len()).is_err());
+        // A codec header of another version.
+        let mut bad = coded.clone();
+        bad[0] ^= 0x40;
+        assert!(decode_indices(&bad, 40, c.marks.len()).is_err());
+        assert!(decode_indices(&coded[..coded.len() - 1], 40, c.marks.len()).is_err());
+    }
+
+    /// The edges a cluster marks, as vertex pairs: what a rotation must keep.
+    fn marked_edges(indices: &[u8], marks: &[u8]) -> Vec<(u8, u8)> {
+        let mut edges: Vec<(u8, u8)> = indices
+            .chunks_exact(3)
+            .zip(marks)
+            .flat_map(|(t, &m)| (0..3).filter(move |k| m >> k & 1 != 0).map(move |k| (t[k], t[(k + 1) % 3])))
+            .collect();
+        edges.sort_unstable();
+        edges
+    }
+
+    #[test]
+    fn rotated_triangles_keep_their_marks() {
+        // A fan whose triangles the codec rotates.
+        let indices: Vec<u8> = (1..20u8).flat_map(|v| [v, v + 1, 0]).collect();
+        let marks: Vec<u8> = (0..19).map(|t| [1u8, 2, 4, 3, 6][t % 5]).collect();
+        let (rotated, moved) = canonical_triangles(&indices, &marks, 21).unwrap();
+        assert_ne!(rotated, indices, "the test needs a rotation");
+        assert_eq!(marked_edges(&rotated, &moved), marked_edges(&indices, &marks));
+        // Stable: the stored form comes back as is.
+        assert_eq!(canonical_triangles(&rotated, &moved, 21).unwrap(), (rotated, moved));
+    }
+
+    #[test]
+    fn first_use_order_follows_the_triangles() {
+        assert_eq!(first_use_order(&[2, 0, 3, 3, 0, 1], 5), vec![2, 0, 3, 1, 4]);
+    }
+
+    #[test]
+    fn smooth_vertices_use_the_parallelogram() {
+        // Two triangles of a quad: vertex 3 is predicted across the edge (1, 2); vertex 4 is
+        // used by no triangle and comes last, from the previous vertex.
+        let mut edges = EdgeTable::new();
+        let preds = predictors(&[0, 1, 2, 2, 1, 3], 5, &mut edges);
+        assert_eq!(
+            preds,
+            vec![
+                (0, Predictor::Anchor),
+                (1, Predictor::Neighbour(0)),
+                (2, Predictor::Neighbour(0)),
+                (3, Predictor::Parallelogram(2, 1, 0)),
+                (4, Predictor::Neighbour(3)),
+            ]
+        );
+        // Decoding order is first use, whatever the numbering.
+        let preds = predictors(&[2, 0, 1], 3, &mut edges);
+        assert_eq!(preds[0], (2, Predictor::Anchor));
+        assert_eq!(preds[1], (0, Predictor::Neighbour(2)));
+    }
+
+    #[test]
+    fn zigzag_round_trips_the_extremes() {
+        for r in [0, 1, -1, i32::MAX, i32::MIN] {
+            assert_eq!(unzigzag32(zigzag32(r)), r);
+        }
+        for r in [0u16, 1, u16::MAX, 0x8000, 0x7fff] {
+            assert_eq!(unzigzag16(zigzag16(r)), r);
+        }
+    }
+}
