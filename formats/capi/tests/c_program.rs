@@ -49,7 +49,7 @@ fn compile(name: &str, sources: &[PathBuf], cxx: bool, lib: &Path) -> PathBuf {
         .arg(lib)
         // What the Rust standard library needs from the system when linked statically, and
         // where the shared library is found at run time.
-        .args(["-lpthread", "-ldl", "-lm", &rpath, "-o"])
+        .args(["-lstdc++", "-lpthread", "-ldl", "-lm", &rpath, "-o"])
         .arg(&exe)
         .output()
         .unwrap_or_else(|e| panic!("running the C compiler `{compiler}`: {e}"));
