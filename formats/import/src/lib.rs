@@ -67,8 +67,10 @@ pub mod obj_stream;
 mod obj_syntax;
 pub mod obj_write;
 mod ply;
+pub mod scene;
 
 pub use mesh::SourceMesh;
+pub use scene::{ImportedScene, SceneFile};
 
 use std::fs::File;
 use std::io::Read;
@@ -251,6 +253,46 @@ fn import_bytes(path: &Path, kind: InputKind, bytes: Vec<u8>, limits: &ImportLim
         InputKind::Obj => obj::import(bytes, limits),
         InputKind::Gltf | InputKind::Glb => gltf::import(path, &bytes, kind, limits),
         InputKind::Ply => ply::import(&bytes, limits),
+    }
+}
+
+/// Imports one mesh file as a scene (policy on [`scene`]): glTF / GLB meshes placed by two
+/// or more nodes become their own meshes, placed by instances; everything else is flattened
+/// as [`import_file`] does. OBJ and PLY give [`import_file`]'s mesh and one identity instance.
+/// Material names come with it ([`material_names`]).
+pub fn import_scene(path: &Path, limits: &ImportLimits) -> Result<ImportedScene, ImportError> {
+    let fail = |kind| ImportError { path: path.to_path_buf(), kind };
+    let kind = InputKind::from_path(path).ok_or_else(|| fail(ImportErrorKind::UnsupportedExtension))?;
+    if matches!(kind, InputKind::Gltf | InputKind::Glb) {
+        let bytes = read_file(path, limits.max_file_bytes).map_err(|e| fail(ImportErrorKind::Io(e)))?.map_err(fail)?;
+        if bytes.is_empty() {
+            return Err(fail(ImportErrorKind::EmptyFile));
+        }
+        return gltf::import_scene(path, &bytes, kind, limits).map_err(fail);
+    }
+    let mesh = import_file(path, limits)?;
+    let material_names = material_names(path)?;
+    let stem = path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let instance = scene::SceneInstance { name: stem, node: None, mesh: 0, transform: scene::IDENTITY };
+    let meshes = vec![scene::SceneMesh { mesh, gltf_mesh: None }];
+    Ok(ImportedScene { meshes, instances: vec![instance], material_names })
+}
+
+/// Material index -> name for the mesh file at `path`, matching [`SourceMesh::materials`]:
+/// OBJ `usemtl` names in order of first use (read line by line; only `usemtl` lines are
+/// checked), glTF material names (`None` where unnamed), nothing for PLY. An index past the
+/// end has no material (OBJ faces before any `usemtl`, glTF primitives without one).
+pub fn material_names(path: &Path) -> Result<Vec<Option<String>>, ImportError> {
+    let fail = |kind| ImportError { path: path.to_path_buf(), kind };
+    match InputKind::from_path(path).ok_or_else(|| fail(ImportErrorKind::UnsupportedExtension))? {
+        InputKind::Obj => Ok(obj_stream::material_names(path).map_err(fail)?.into_iter().map(Some).collect()),
+        InputKind::Ply => Ok(Vec::new()),
+        kind @ (InputKind::Gltf | InputKind::Glb) => {
+            let limits = ImportLimits::default();
+            let bytes =
+                read_file(path, limits.max_file_bytes).map_err(|e| fail(ImportErrorKind::Io(e)))?.map_err(fail)?;
+            gltf::material_names(&bytes, kind).map_err(fail)
+        }
     }
 }
 
