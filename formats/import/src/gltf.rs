@@ -157,14 +157,20 @@ fn node_name(document: &Document, node: Option<usize>) -> String {
     named.unwrap_or_else(|| format!("node {index}"))
 }
 
-/// The names of the glTF's materials, by index (`None` where unnamed); JSON only.
-pub(super) fn material_names(bytes: &[u8], kind: InputKind) -> KindResult<Vec<Option<String>>> {
+/// The names of the glTF's materials, by index (`None` where unnamed), and whether
+/// [`import_scene`] would find a mesh placed twice; from the JSON and accessor checks only,
+/// no buffer is read.
+pub(super) fn outline(bytes: &[u8], kind: InputKind) -> KindResult<(Vec<Option<String>>, bool)> {
     if bytes.is_empty() {
         return Err(ImportErrorKind::EmptyFile);
     }
     let (json_bytes, _) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
-    Ok(document.materials().map(|m| m.name().map(str::to_owned)).collect())
+    let names = document.materials().map(|m| m.name().map(str::to_owned)).collect();
+    let counts = mesh_instance_counts(&document)?;
+    let plan = plan(&document, &counts, &ImportLimits::default())?;
+    let instanced = counts.iter().zip(&plan.primitives).any(|(&n, p)| n >= 2 && !p.is_empty());
+    Ok((names, instanced))
 }
 
 /// The external buffer files the import of this glTF reads (see `import::referenced_files`).

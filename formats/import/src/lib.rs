@@ -283,15 +283,37 @@ pub fn import_scene(path: &Path, limits: &ImportLimits) -> Result<ImportedScene,
 /// checked), glTF material names (`None` where unnamed), nothing for PLY. An index past the
 /// end has no material (OBJ faces before any `usemtl`, glTF primitives without one).
 pub fn material_names(path: &Path) -> Result<Vec<Option<String>>, ImportError> {
+    scene_outline(path).map(|outline| outline.material_names)
+}
+
+/// What a scene import of a file would give, found without reading its triangles (so that a
+/// batch can look up a cached bake cheaply): [`material_names`], and whether
+/// [`import_scene`] would place some mesh more than once.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneOutline {
+    /// Material index -> name, as [`material_names`].
+    pub material_names: Vec<Option<String>>,
+    /// Whether some glTF mesh is placed by two or more nodes.
+    pub instanced: bool,
+}
+
+/// The [`SceneOutline`] of the mesh file at `path`; errors like [`import_file`] for what it
+/// reads.
+pub fn scene_outline(path: &Path) -> Result<SceneOutline, ImportError> {
     let fail = |kind| ImportError { path: path.to_path_buf(), kind };
+    let names = |names: Vec<String>| names.into_iter().map(Some).collect();
     match InputKind::from_path(path).ok_or_else(|| fail(ImportErrorKind::UnsupportedExtension))? {
-        InputKind::Obj => Ok(obj_stream::material_names(path).map_err(fail)?.into_iter().map(Some).collect()),
-        InputKind::Ply => Ok(Vec::new()),
+        InputKind::Obj => Ok(SceneOutline {
+            material_names: names(obj_stream::material_names(path).map_err(fail)?),
+            instanced: false,
+        }),
+        InputKind::Ply => Ok(SceneOutline { material_names: Vec::new(), instanced: false }),
         kind @ (InputKind::Gltf | InputKind::Glb) => {
             let limits = ImportLimits::default();
             let bytes =
                 read_file(path, limits.max_file_bytes).map_err(|e| fail(ImportErrorKind::Io(e)))?.map_err(fail)?;
-            gltf::material_names(&bytes, kind).map_err(fail)
+            let (material_names, instanced) = gltf::outline(&bytes, kind).map_err(fail)?;
+            Ok(SceneOutline { material_names, instanced })
         }
     }
 }

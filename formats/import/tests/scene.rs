@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
 use mres_import::scene::{flatten, IDENTITY};
-use mres_import::{import_file, import_scene, material_names, ImportLimits, SourceMesh};
+use mres_import::{import_file, import_scene, material_names, scene_outline, ImportLimits, SourceMesh};
 
 /// The quad's positions (local space).
 const QUAD: [[f32; 3]; 4] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
@@ -93,6 +93,7 @@ fn shared_mesh_is_read_once_in_local_space_and_placed_by_every_node() {
     let path = write(dir.path(), "engine.gltf", &scene_json(true));
     let scene = import_scene(&path, &ImportLimits::default()).unwrap();
     assert!(scene.is_instanced());
+    assert!(scene_outline(&path).unwrap().instanced);
     // The flattened rest (the triangle, once) and the quad, once.
     assert_eq!(scene.meshes.len(), 2);
     assert_eq!(scene.meshes[0].gltf_mesh, None);
@@ -134,6 +135,7 @@ fn scene_without_instancing_is_the_flattened_mesh() {
     let path = write(dir.path(), "single.gltf", &scene_json(false));
     let scene = import_scene(&path, &ImportLimits::default()).unwrap();
     assert!(!scene.is_instanced());
+    assert!(!scene_outline(&path).unwrap().instanced);
     assert_eq!(scene.meshes.len(), 1);
     assert_eq!(scene.meshes[0].mesh, import_file(&path, &ImportLimits::default()).unwrap());
     assert_eq!(scene.instances.len(), 1);
