@@ -31,7 +31,9 @@
 //!
 //! # glTF 2.0 and GLB
 //! - The default scene is imported (else scene 0; with no scenes, every mesh once,
-//!   untransformed), every mesh node under its world transform, instancing flattened.
+//!   untransformed), every mesh node under its world transform, instancing flattened by
+//!   [`import_file`]; [`import_scene`] keeps meshes placed by two or more nodes apart, placed
+//!   by instances (policy on [`scene`]).
 //!   Normals use the inverse-transpose; a mirroring transform flips the winding back. Skins
 //!   and morph targets are ignored (bind pose).
 //! - Modes TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN, indexed or not; primitives of other
