@@ -26,10 +26,10 @@ pub const BAKER_VERSION: u32 = 4;
 pub struct AssetReport {
     /// The input file.
     pub input: PathBuf,
-    /// The main `.mres` written (absent on failure; the scene file when every mesh of a scene
-    /// is shared, so that there is no flattened mesh).
+    /// The main `.mres` written (absent on failure; the scene file for an instanced scene,
+    /// which has no flattened mesh).
     pub output: Option<PathBuf>,
-    /// The other `.mres` files of a scene (`STEM.meshN.mres`: meshes placed by several nodes).
+    /// The other `.mres` files: an instanced scene's meshes (`STEM.meshN.mres`).
     pub mesh_outputs: Vec<PathBuf>,
     /// The scene file written (docs/FORMAT.md "Scene file"), if the asset has one.
     pub scene: Option<PathBuf>,
@@ -129,8 +129,8 @@ impl Batch<'_> {
         self.prefix.join(below)
     }
 
-    /// The main `.mres` file `input` is baked to (its flattened mesh); a scene's shared meshes
-    /// go beside it ([`mesh_file_name`]), with the scene file ([`scene_file_path`]).
+    /// The main `.mres` file `input` is baked to (its flattened mesh); an instanced scene's
+    /// meshes go beside it instead ([`mesh_file_name`]), with the scene file ([`scene_file_path`]).
     pub fn output_for(&self, input: &Path) -> PathBuf {
         self.out_dir.join(self.relative(input)).with_extension("mres")
     }
@@ -409,7 +409,7 @@ impl AssetReport {
             self.bytes += file.file_size() as u64;
         }
         if self.output.is_none() {
-            // Every mesh of the scene is shared: the scene file stands for the asset.
+            // An instanced scene has no flattened mesh: the scene file stands for the asset.
             self.output = self.scene.clone();
         }
         self.degenerate_dropped = known_dropped;

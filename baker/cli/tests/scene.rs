@@ -1,5 +1,5 @@
 //! Scenes through `bake-all`: a glTF written by the test whose quad mesh is placed by three
-//! nodes bakes that mesh once (into its own `.mres`, content-addressed in the cache), the
+//! nodes bakes each mesh once (into its own `.mres`, content-addressed in the cache), the
 //! scene file lists every instance with its name and world transform and the material names,
 //! `mres export` writes those names, stale scene outputs are found, and a broken scene file is
 //! an error naming it.
@@ -126,27 +126,29 @@ fn a_shared_mesh_is_baked_once_and_the_scene_file_places_it() {
     t.write("engine.gltf", &scene_json(true));
     let report = t.bake(&[]);
     let out = t.out();
-    // The quad (2 triangles) once in its own file, the rest (the triangle) in the main file:
-    // 3 triangles stored, where flattening stores 3 x 2 + 1.
+    // Each glTF mesh once in its own file: the quad (2 triangles) and the triangle, 3 stored
+    // where flattening stores 3 x 2 + 1; no flattened main file.
     assert_eq!(source_triangles(&out.join("engine.mesh0.mres")), 2);
-    assert_eq!(source_triangles(&out.join("engine.mres")), 1);
+    assert_eq!(source_triangles(&out.join("engine.mesh1.mres")), 1);
+    assert!(!out.join("engine.mres").exists());
     let r = asset(&report, "engine.gltf");
     assert_eq!(r["input_triangles"], 3);
-    assert_eq!(r["mesh_outputs"], serde_json::json!([out.join("engine.mesh0.mres")]));
+    assert_eq!(r["mesh_outputs"], serde_json::json!([out.join("engine.mesh0.mres"), out.join("engine.mesh1.mres")]));
     assert_eq!(r["scene"], serde_json::json!(out.join("engine.scene.json")));
+    assert_eq!(r["output"], r["scene"]);
 
     let scene = SceneFile::read(&out.join("engine.scene.json")).unwrap();
     let files: Vec<&str> = scene.meshes.iter().map(|m| m.file.as_str()).collect();
-    assert_eq!(files, ["engine.mres", "engine.mesh0.mres"]);
+    assert_eq!(files, ["engine.mesh0.mres", "engine.mesh1.mres"]);
     for mesh in &scene.meshes {
         assert_eq!(mesh.materials, [Some("steel".to_owned()), Some("brass".to_owned())]);
     }
     let placed: Vec<(&str, usize)> = scene.instances.iter().map(|i| (i.name.as_str(), i.mesh)).collect();
-    assert_eq!(placed, [("engine", 0), ("bolt_a", 1), ("bolt_b", 1), ("bolt_c", 1)]);
+    assert_eq!(placed, [("bolt_a", 0), ("bolt_b", 0), ("node 4", 1), ("bolt_c", 0)]);
     let expected: [[f32; 16]; 4] = [
-        [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.],
         [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 10., 1., 0., 1.],
         [0., 2., 0., 0., -2., 0., 0., 0., 0., 0., 2., 0., 10., 2., 0., 1.],
+        [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 10., 0., 0., 1.],
         [-1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.],
     ];
     for (instance, expected) in scene.instances.iter().zip(expected) {
@@ -169,6 +171,7 @@ fn identical_meshes_in_different_assets_share_cache_entries() {
     let report = t.bake(&[]);
     assert_eq!(asset(&report, "b.gltf")["status"], "cached");
     let mesh = |name: &str| std::fs::read(t.out().join(name)).unwrap();
+    assert_eq!(mesh("a.mesh1.mres"), mesh("b.mesh1.mres"));
     assert_eq!(mesh("a.mesh0.mres"), mesh("b.mesh0.mres"));
 }
 
@@ -221,8 +224,10 @@ fn outputs_of_a_scene_no_longer_instanced_are_stale() {
     t.bake(&["--no-cache"]);
     t.write("engine.gltf", &scene_json(false));
     let report = t.bake(&["--no-cache"]);
-    assert_eq!(report["stale"], serde_json::json!([t.out().join("engine.mesh0.mres")]));
+    let old = [t.out().join("engine.mesh0.mres"), t.out().join("engine.mesh1.mres")];
+    assert_eq!(report["stale"], serde_json::json!(old));
     let report = t.bake(&["--no-cache", "--prune"]);
-    assert_eq!(report["pruned"], serde_json::json!([t.out().join("engine.mesh0.mres")]));
+    assert_eq!(report["pruned"], serde_json::json!(old));
+    assert!(t.out().join("engine.mres").is_file());
     assert!(t.out().join("engine.scene.json").is_file(), "still written: the materials have names");
 }

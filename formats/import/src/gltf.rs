@@ -50,7 +50,7 @@ struct Plan {
     has_normals: bool,
     has_uvs: bool,
     /// Per mesh index, whether all its read primitives have normals / UVs (the scene import
-    /// decides attributes per baked mesh, so that a mesh's content does not depend on others).
+    /// decides attributes per mesh, so that a mesh's content does not depend on the others).
     mesh_attributes: Vec<(bool, bool)>,
     /// Per mesh index, (vertices, triangles) of one copy: capacity hints.
     mesh_sizes: Vec<(u64, u64)>,
@@ -75,10 +75,10 @@ pub(super) fn import(path: &Path, bytes: &[u8], kind: InputKind, limits: &Import
     read_mesh(&document, &instances, &plan, &buffers)
 }
 
-/// Imports a `.gltf` or `.glb` as a scene: meshes placed by two or more nodes are read once
-/// in their local space and placed by instances; every other placement is flattened into one
-/// mesh, exactly as [`import`] flattens all of them (policy and reasons on `crate::scene`).
-/// A scene without instancing gives [`import`]'s mesh and one identity instance.
+/// Imports a `.gltf` or `.glb` as a scene. If some mesh is placed by two or more nodes, every
+/// mesh is read once in its local space and placed by instances; a scene without instancing
+/// gives [`import`]'s flattened mesh and one identity instance (policy and reasons on
+/// `crate::scene`).
 pub(super) fn import_scene(
     path: &Path,
     bytes: &[u8],
@@ -103,9 +103,8 @@ pub(super) fn import_scene(
         scene.instances.push(SceneInstance { name: stem, node: None, mesh: 0, transform: IDENTITY });
         return Ok(scene);
     }
-    let single: Vec<&Instance> = instances.iter().filter(|i| uses[i.mesh] < 2).collect();
     let mut dropped = 0;
-    // Degenerate-only parts are dropped, as flattening would drop their triangles.
+    // Degenerate-only meshes are dropped, as flattening would drop their triangles.
     let mut keep = |result: KindResult<SourceMesh>| match result {
         Ok(mesh) => Ok(Some(mesh)),
         Err(ImportErrorKind::NoTriangles { degenerate_dropped }) => {
@@ -114,22 +113,13 @@ pub(super) fn import_scene(
         }
         Err(e) => Err(e),
     };
-    if !single.is_empty() {
-        if let Some(mesh) = keep(read_group(&document, &single, false, &plan, &buffers))? {
-            scene.meshes.push(SceneMesh { mesh, gltf_mesh: None });
-            scene.instances.push(SceneInstance { name: stem, node: None, mesh: 0, transform: IDENTITY });
-        }
-    }
-    // Shared meshes in order of first placement; their instances in depth-first node order.
+    // Every mesh once, in order of first placement; instances in depth-first node order.
     let mut slot: Vec<Option<Option<usize>>> = vec![None; uses.len()];
     for instance in &instances {
-        if uses[instance.mesh] < 2 {
-            continue;
-        }
         let mesh_slot = match slot[instance.mesh] {
             Some(known) => known,
             None => {
-                let read = keep(read_group(&document, &[instance], true, &plan, &buffers))?;
+                let read = keep(read_local(&document, instance.mesh, &plan, &buffers))?;
                 let known = read.map(|mesh| {
                     scene.meshes.push(SceneMesh { mesh, gltf_mesh: Some(instance.mesh) });
                     scene.meshes.len() - 1
@@ -726,35 +716,20 @@ fn read_mesh(document: &Document, instances: &[Instance], plan: &Plan, buffers: 
     builder.finish()
 }
 
-/// Reads the planned primitives of `instances` into one mesh, under their world transforms
-/// or (`local`) untransformed; normals and UVs are kept if every mesh read has them.
-fn read_group(
-    document: &Document,
-    instances: &[&Instance],
-    local: bool,
-    plan: &Plan,
-    buffers: &Buffers,
-) -> KindResult<SourceMesh> {
-    let meshes: Vec<_> = document.meshes().collect();
+/// Reads the planned primitives of mesh `mesh` untransformed (its local space), with the
+/// normals and UVs that all of them have.
+fn read_local(document: &Document, mesh: usize, plan: &Plan, buffers: &Buffers) -> KindResult<SourceMesh> {
     let unassigned_material = document.materials().len() as u32;
-    let (mut normals, mut uvs, mut vertices, mut triangles) = (true, true, 0u64, 0u64);
-    for instance in instances {
-        let (n, u) = plan.mesh_attributes[instance.mesh];
-        let (v, t) = plan.mesh_sizes[instance.mesh];
-        (normals, uvs, vertices, triangles) = (normals && n, uvs && u, vertices + v, triangles + t);
-    }
+    let (normals, uvs) = plan.mesh_attributes[mesh];
+    let (vertices, triangles) = plan.mesh_sizes[mesh];
     let mut builder = MeshBuilder::new(normals, uvs, vertices as usize, triangles as usize);
     let identity = Transform::new(&IDENTITY);
-    for instance in instances {
-        let world = Transform::new(&instance.transform);
-        let transform = if local { &identity } else { &world };
-        let primitives: Vec<_> = meshes[instance.mesh].primitives().collect();
-        for &p in &plan.primitives[instance.mesh] {
-            let primitive = &primitives[p];
-            let material = primitive.material().index().map_or(unassigned_material, |m| m as u32);
-            let at = format!("mesh {} primitive {p}", instance.mesh);
-            read_primitive(primitive, &at, transform, buffers, material, &mut builder)?;
-        }
+    let primitives: Vec<_> = document.meshes().nth(mesh).map(|m| m.primitives().collect()).unwrap_or_default();
+    for &p in &plan.primitives[mesh] {
+        let primitive = &primitives[p];
+        let material = primitive.material().index().map_or(unassigned_material, |m| m as u32);
+        let at = format!("mesh {mesh} primitive {p}");
+        read_primitive(primitive, &at, &identity, buffers, material, &mut builder)?;
     }
     builder.finish()
 }

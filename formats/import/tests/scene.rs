@@ -1,11 +1,12 @@
 //! Scene import: a glTF written by the test, whose quad mesh is placed by three nodes (one of
-//! them under a rotated, scaled parent, one mirrored) and whose triangle mesh is placed once;
-//! material names of glTF and OBJ.
+//! them under a rotated, scaled parent, one mirrored) and whose triangle mesh is placed once
+//! by an unnamed node; material names of glTF and OBJ.
 
 use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
 use mres_import::scene::{flatten, IDENTITY};
+
 use mres_import::{import_file, import_scene, material_names, scene_outline, ImportLimits, SourceMesh};
 
 /// The quad's positions (local space).
@@ -94,23 +95,26 @@ fn shared_mesh_is_read_once_in_local_space_and_placed_by_every_node() {
     let scene = import_scene(&path, &ImportLimits::default()).unwrap();
     assert!(scene.is_instanced());
     assert!(scene_outline(&path).unwrap().instanced);
-    // The flattened rest (the triangle, once) and the quad, once.
+    // Each glTF mesh once, in order of first placement, in its local space.
     assert_eq!(scene.meshes.len(), 2);
-    assert_eq!(scene.meshes[0].gltf_mesh, None);
-    assert_eq!(scene.meshes[0].mesh.triangle_count(), 1);
-    assert_eq!(scene.meshes[1].gltf_mesh, Some(0));
-    assert_eq!(scene.meshes[1].mesh.positions, QUAD.to_vec(), "the shared mesh stays in local space");
-    assert_eq!(scene.meshes[1].mesh.triangle_count(), 2);
-    assert!(scene.meshes[1].mesh.normals.is_some(), "its normals are kept though the triangle has none");
+    assert_eq!(scene.meshes[0].gltf_mesh, Some(0));
+    assert_eq!(scene.meshes[0].mesh.positions, QUAD.to_vec(), "the shared mesh stays in local space");
+    assert_eq!(scene.meshes[0].mesh.triangle_count(), 2);
+    assert!(scene.meshes[0].mesh.normals.is_some(), "its normals are kept though the triangle has none");
+    assert_eq!(scene.meshes[1].gltf_mesh, Some(1));
+    assert_eq!(scene.meshes[1].mesh.positions, TRI.to_vec());
 
     let placed: Vec<(&str, Option<usize>, usize)> =
         scene.instances.iter().map(|i| (i.name.as_str(), i.node, i.mesh)).collect();
-    assert_eq!(placed, [("engine", None, 0), ("bolt_a", Some(1), 1), ("bolt_b", Some(3), 1), ("bolt_c", Some(5), 1)]);
+    assert_eq!(
+        placed,
+        [("bolt_a", Some(1), 0), ("bolt_b", Some(3), 0), ("node 4", Some(4), 1), ("bolt_c", Some(5), 0)]
+    );
     let t = |i: usize| flatten(&scene.instances[i].transform);
-    assert_eq!(t(0), flatten(&IDENTITY));
-    assert_eq!(t(1), [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 10., 1., 0., 1.]);
+    assert_eq!(t(0), [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 10., 1., 0., 1.]);
     // root (translate 10) * arm (rotate 90° about z, scale 2) * bolt_b (translate 1 along x).
-    assert!(close(&t(2), &[0., 2., 0., 0., -2., 0., 0., 0., 0., 0., 2., 0., 10., 2., 0., 1.]), "{:?}", t(2));
+    assert!(close(&t(1), &[0., 2., 0., 0., -2., 0., 0., 0., 0., 0., 2., 0., 10., 2., 0., 1.]), "{:?}", t(1));
+    assert_eq!(t(2), [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 10., 0., 0., 1.]);
     assert_eq!(t(3), [-1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.]);
 }
 
@@ -150,8 +154,8 @@ fn material_names_follow_the_material_indices() {
     assert_eq!(names, [Some("steel".to_owned()), Some("brass".to_owned())]);
     let scene = import_scene(&gltf, &ImportLimits::default()).unwrap();
     assert_eq!(scene.material_names, names);
-    assert_eq!(scene.meshes[0].mesh.materials, [1], "the triangle is brass");
-    assert!(scene.meshes[1].mesh.materials.iter().all(|&m| m == 0), "the quad is steel");
+    assert!(scene.meshes[0].mesh.materials.iter().all(|&m| m == 0), "the quad is steel");
+    assert_eq!(scene.meshes[1].mesh.materials, [1], "the triangle is brass");
 
     // OBJ: order of first `usemtl`; faces before any `usemtl` get one past the names.
     let obj = write(

@@ -29,8 +29,8 @@ use std::time::Instant;
         the embedded defaults. The directory of that file is the asset root when the input lies inside it \
         (else the input directory): outputs mirror the tree below the asset root and [[override]] globs match \
         paths below it, so baking a subfolder or one file writes what baking the whole tree writes.\n\n\
-        A glTF mesh placed by two or more nodes is baked once into NAME.meshN.mres beside NAME.mres (the \
-        rest, flattened); NAME.scene.json lists the .mres files, material names and instances (written \
+        In a glTF scene where a mesh is placed by two or more nodes, each mesh is baked once into \
+        NAME.meshN.mres (else the scene is flattened into NAME.mres); NAME.scene.json lists the .mres files, material names and instances (written \
         whenever an asset has instances or material names; docs/FORMAT.md, \"Scene file\").\n\n\
         After a directory's batch, .mres and scene files in the output directory that no current asset \
         produces (renamed or deleted assets) are listed; --prune deletes them.\n\n\
