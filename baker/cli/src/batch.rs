@@ -11,9 +11,9 @@ use mres_import::scene::{
     flatten, mesh_file_name, scene_file_path, SceneFileInstance, SceneFileMesh, IDENTITY, SCENE_VERSION,
 };
 use mres_import::{import_scene, referenced_files, scene_outline, ImportLimits, SceneFile, SourceMesh};
-use std::collections::HashSet;
 use rayon::prelude::*;
 use serde::Serialize;
+use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

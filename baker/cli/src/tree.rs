@@ -181,7 +181,8 @@ fn percent_decode(uri: &str) -> String {
 
 /// Whether `path` is something a batch writes: a `.mres` or a scene file.
 fn is_output(path: &Path) -> bool {
-    let scene = path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.ends_with(mres_import::scene::SCENE_SUFFIX));
+    let scene =
+        path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.ends_with(mres_import::scene::SCENE_SUFFIX));
     scene || path.extension().is_some_and(|e| e == "mres")
 }
 

@@ -183,7 +183,8 @@ fn a_scene_without_instancing_bakes_as_before() {
     let settings = mres_build::settings::BakeSettings::default();
     let alone = mres_build::bake::bake_file(&t.assets().join("single.gltf"), &settings, &|_| {}).unwrap();
     assert_eq!(std::fs::read(t.out().join("single.mres")).unwrap(), alone.bytes, "byte-identical to a plain bake");
-    let names: Vec<String> = std::fs::read_dir(t.out()).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    let names: Vec<String> =
+        std::fs::read_dir(t.out()).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     let mut names = names;
     names.sort();
     // Its material names still get a scene file; no mesh files.
@@ -193,10 +194,7 @@ fn a_scene_without_instancing_bakes_as_before() {
 #[test]
 fn obj_material_names_reach_the_scene_file_and_export() {
     let t = Tree::new();
-    t.write(
-        "m.obj",
-        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nusemtl rust red\nf 1 2 3\nusemtl chrome\nf 2 4 3\n",
-    );
+    t.write("m.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nusemtl rust red\nf 1 2 3\nusemtl chrome\nf 2 4 3\n");
     t.bake(&["--no-cache"]);
     let scene = SceneFile::read(&t.out().join("m.scene.json")).unwrap();
     assert_eq!(scene.meshes[0].file, "m.mres");

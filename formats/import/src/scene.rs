@@ -215,7 +215,10 @@ impl SceneFile {
         }
         for (m, mesh) in self.meshes.iter().enumerate() {
             if crate::resolve_inside(Path::new("."), &mesh.file).is_none() || mesh.file.contains('\\') {
-                return invalid(format!("mesh {m}: file {:?} is not a relative path inside the scene's directory", mesh.file));
+                return invalid(format!(
+                    "mesh {m}: file {:?} is not a relative path inside the scene's directory",
+                    mesh.file
+                ));
             }
         }
         for (i, instance) in self.instances.iter().enumerate() {
@@ -289,7 +292,12 @@ mod tests {
                 name: "bolt \"1\"".into(),
                 node: Some(4),
                 mesh: 1,
-                transform: flatten(&[[0.5, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [1.0, 2.0, 3.1, 1.0]]),
+                transform: flatten(&[
+                    [0.5, 0.0, 0.0, 0.0],
+                    [0.0, 1.0, 0.0, 0.0],
+                    [0.0, 0.0, 1.0, 0.0],
+                    [1.0, 2.0, 3.1, 1.0],
+                ]),
             }],
         }
     }

@@ -242,7 +242,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
     for glob in &unmatched {
         eprintln!("warning: {glob}");
     }
-    let (stale, pruned) = if setup.directory { stale(&cli, &setup, &batch, &reports)? } else { (Vec::new(), Vec::new()) };
+    let (stale, pruned) =
+        if setup.directory { stale(&cli, &setup, &batch, &reports)? } else { (Vec::new(), Vec::new()) };
     if let Some(mut file) = setup.report.take() {
         let json = report_json(&setup, &reports, seconds, &unmatched, &stale, &pruned);
         let text = serde_json::to_string_pretty(&json)?;
