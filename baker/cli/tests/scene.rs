@@ -159,6 +159,7 @@ fn a_shared_mesh_is_baked_once_and_the_scene_file_places_it() {
     // A second run finds everything in the cache and leaves the outputs alone.
     let report = t.bake(&[]);
     assert_eq!(asset(&report, "engine.gltf")["status"], "cached");
+    assert_eq!(report["stale"], serde_json::json!([]), "a scene's own outputs are not stale");
 }
 
 #[test]
