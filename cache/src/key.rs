@@ -63,6 +63,21 @@ impl CacheKey {
         CacheKey(*h.finalize().as_bytes())
     }
 
+    /// The key of a mesh by its content rather than by the file it came from, so that the
+    /// same mesh in different assets (or placed by several nodes) shares one entry. Hashes
+    /// `KSCH`, `FMTV`, `BAKV`, `SETT` as [`CacheKey::new`] does, then `MESH` (the caller's
+    /// 32-byte hash of the mesh's triangles and attributes) instead of `INPT`; no
+    /// referenced files. A distinct tag, so no file key equals a mesh key.
+    pub fn for_mesh(content_hash: &[u8; 32], settings: &str, format_version: u32, baker_version: u32) -> CacheKey {
+        let mut h = blake3::Hasher::new_derive_key(KEY_CONTEXT);
+        field(&mut h, b"KSCH", &KEY_SCHEMA_VERSION.to_le_bytes());
+        field(&mut h, b"FMTV", &format_version.to_le_bytes());
+        field(&mut h, b"BAKV", &baker_version.to_le_bytes());
+        field(&mut h, b"SETT", settings.as_bytes());
+        field(&mut h, b"MESH", content_hash);
+        CacheKey(*h.finalize().as_bytes())
+    }
+
     /// Wraps raw key bytes (e.g. read back from a report).
     pub fn from_bytes(bytes: [u8; 32]) -> CacheKey {
         CacheKey(bytes)
@@ -238,6 +253,19 @@ mod tests {
         let mut rev = refs.clone();
         rev.reverse();
         assert_eq!(key_of(&input, refs, &settings, 3, 7), key_of(&input, rev, &settings, 3, 7));
+    }
+
+    #[test]
+    fn mesh_keys_depend_on_each_input_and_differ_from_file_keys() {
+        let (_, _, settings) = base();
+        let hash = [7u8; 32];
+        let mesh = CacheKey::for_mesh(&hash, &settings, 2, 4);
+        assert_eq!(mesh, CacheKey::for_mesh(&hash, &settings, 2, 4));
+        assert_ne!(mesh, CacheKey::for_mesh(&[8u8; 32], &settings, 2, 4));
+        assert_ne!(mesh, CacheKey::for_mesh(&hash, "other", 2, 4));
+        assert_ne!(mesh, CacheKey::for_mesh(&hash, &settings, 3, 4));
+        assert_ne!(mesh, CacheKey::for_mesh(&hash, &settings, 2, 5));
+        assert_ne!(mesh, key_of(&hash, Vec::new(), &settings, 2, 4));
     }
 
     #[test]

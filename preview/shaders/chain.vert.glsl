@@ -13,7 +13,7 @@ layout(location = 1) flat out uint slot;
 void main() {
     uint v = uint(gl_VertexIndex);
     vec3 p = vec3(positions[3u * v], positions[3u * v + 1u], positions[3u * v + 2u]);
-    p += instances[instance_list[gl_InstanceIndex]].xyz;
+    p += instances[instance_list[gl_InstanceIndex]].model[3].xyz;
     world_position = p;
     slot = 0u;
     gl_Position = view.view_proj * vec4(p, 1.0);

@@ -5,10 +5,10 @@
 // nearest point, the same rule as the DAG's) is <= tau, or level 0 with FLAG_FULL_DETAIL. The
 // instance is appended to its level's list, whose draw command counts it.
 #extension GL_GOOGLE_include_directive : require
-#include "common.glsl"
-
+// Declared before common.glsl: its grid_invocation_index reads gl_WorkGroupSize, which is
+// (1, 1, 1) until the size is declared (every workgroup but the first lost its offset).
 layout(local_size_x = 64) in;
-
+#include "common.glsl"
 layout(set = 0, binding = 13, std430) writeonly buffer ListBlock { uint instance_list[]; };
 // Per level: x = object-space error.
 layout(set = 0, binding = 14, std430) readonly buffer ChainBlock { vec4 chain_levels[]; };
@@ -20,7 +20,7 @@ void main() {
     if (i >= view.instance_count) {
         return;
     }
-    vec3 center = view.model_center + instances[i].xyz;
+    vec3 center = view.model_center + instances[i].model[3].xyz;
     if ((view.flags & FLAG_FRUSTUM_CULL) != 0u && !sphere_in_frustum(vec4(center, view.model_near))) {
         return;
     }

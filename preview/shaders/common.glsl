@@ -119,12 +119,54 @@ uint read_u8(uint byte_offset) {
     return (page_words[byte_offset >> 2] >> ((byte_offset & 3u) * 8u)) & 0xFFu;
 }
 
-// Instance translations (xyz; w unused), object space of the scene.
-layout(set = 0, binding = 8, std430) readonly buffer InstanceBlock { vec4 instances[]; };
+// One placement of a mesh: object-to-world transform, the rows of its inverse, the mesh's
+// grid, culling sphere and level bins, and the factors of the selection rule under a transform
+// (docs/FORMAT.md "Scene file"): the eye moves into object space, z_near scales by near_scale,
+// projected errors by error_scale. For a pure translation every factor is 1 and every
+// transformed value has exactly the arithmetic of adding or subtracting the translation.
+struct Instance {
+    mat4 model;
+    vec4 inverse_row0;
+    vec4 inverse_row1;
+    vec4 inverse_row2;
+    vec4 grid;
+    vec4 center;
+    float model_near;
+    float error_scale;
+    float near_scale;
+    float radius_scale;
+    uint bin_first;
+    uint bin_count;
+    uint mirrored;
+    uint mesh;
+};
 
-// Object-space position of vertex `v` of cluster `c` (FORMAT.md §5.3, one f32 multiply, then
-// one f32 add, as the reference decoder does).
-vec3 decode_position(Cluster c, uint v) {
+layout(set = 0, binding = 8, std430) readonly buffer InstanceBlock { Instance instances[]; };
+
+// model * (p, 1), each coordinate summed in a fixed order without FMA, so that a pure
+// translation gives exactly p + t ((p.x + 0) + 0 = p.x).
+vec3 to_world(Instance inst, vec3 p) {
+    mat4 m = inst.model;
+    precise vec3 a = m[0].xyz * p.x;
+    precise vec3 b = m[1].xyz * p.y;
+    precise vec3 c = m[2].xyz * p.z;
+    precise vec3 sum = ((a + b) + c) + m[3].xyz;
+    return sum;
+}
+
+// The inverse applied to a world point, in the same fixed order: a pure translation gives
+// exactly w - t.
+vec3 to_object(Instance inst, vec3 w) {
+    precise vec3 a = vec3(inst.inverse_row0.x, inst.inverse_row1.x, inst.inverse_row2.x) * w.x;
+    precise vec3 b = vec3(inst.inverse_row0.y, inst.inverse_row1.y, inst.inverse_row2.y) * w.y;
+    precise vec3 c = vec3(inst.inverse_row0.z, inst.inverse_row1.z, inst.inverse_row2.z) * w.z;
+    precise vec3 sum = ((a + b) + c) + vec3(inst.inverse_row0.w, inst.inverse_row1.w, inst.inverse_row2.w);
+    return sum;
+}
+
+// Object-space position of vertex `v` of cluster `c` on the grid `grid` (origin xyz, step w;
+// FORMAT.md §5.3, one f32 multiply, then one f32 add, as the reference decoder does).
+vec3 decode_position(Cluster c, uint v, vec4 grid) {
     uint page = page_base[c.page];
     uint header = page + c.header_offset;
     uint hw = header >> 2;
@@ -137,8 +179,8 @@ vec3 decode_position(Cluster c, uint v) {
     uint dy = read_bits(stream, bit + bits.x, bits.y);
     uint dz = read_bits(stream, bit + bits.x + bits.y, bits.z);
     ivec3 q = lo + ivec3(int(dx), int(dy), int(dz));
-    precise vec3 scaled = vec3(q) * view.grid_step;
-    precise vec3 p = view.grid_origin + scaled;
+    precise vec3 scaled = vec3(q) * grid.w;
+    precise vec3 p = grid.xyz + scaled;
     return p;
 }
 
@@ -240,10 +282,12 @@ float sqrt_rn(float x) {
 #endif
 
 // FORMAT.md §6: projected(sphere, error) in pixels for an eye in the cluster's object space
-// (the view's eye minus the instance translation; exactly the view's eye for an instance at 0), with the spec's operations in its order:
-// dx = center - eye; d = sqrt((dx*dx + dy*dy) + dz*dz); d = max(d - radius, z_near);
-// p = ((error / d) * (H * 0.5)) * proj11. +inf stays +inf.
-float projected_error(vec4 sphere, float error, vec3 eye) {
+// (the view's eye moved into the instance's object space; exactly the view's eye for an
+// identity instance) and the near distance z_near there, with the spec's operations in its
+// order: dx = center - eye; d = sqrt((dx*dx + dy*dy) + dz*dz); d = max(d - radius, z_near);
+// p = ((error / d) * (H * 0.5)) * proj11. +inf stays +inf. Under a transform the caller
+// multiplies the result by the instance's error_scale.
+float projected_error(vec4 sphere, float error, vec3 eye, float z_near) {
     if (error == 0.0) {
         return 0.0;
     }
@@ -256,7 +300,7 @@ float projected_error(vec4 sphere, float error, vec3 eye) {
     precise float sum = (xx + yy) + zz;
     float distance = sqrt_rn(sum);
     precise float near_d = distance - sphere.w;
-    float d = max(near_d, view.z_near);
+    float d = max(near_d, z_near);
     float q = isinf(error) ? error : div_rn(error, d);
     precise float half_h = view.viewport_height * 0.5;
     precise float scaled = q * half_h;

@@ -35,9 +35,10 @@ void main() {
         tint = heat_color(float(c.level) / 12.0);
     } else {
         // Own projected error over tau: 0 (level 0, exact) blue .. tau orange.
-        vec3 eye = view.eye - instances[entry.y].xyz;
-        float d = max(distance(c.own_sphere.xyz, eye) - c.own_sphere.w, view.z_near);
-        float p = c.own_error / d * view.viewport_height * 0.5 * view.proj_y;
+        Instance inst = instances[entry.y];
+        vec3 eye = to_object(inst, view.eye);
+        float d = max(distance(c.own_sphere.xyz, eye) - c.own_sphere.w, view.z_near * inst.near_scale);
+        float p = c.own_error / d * view.viewport_height * 0.5 * view.proj_y * inst.error_scale;
         tint = heat_color(view.tau > 0.0 ? p / view.tau : 0.0);
     }
     color = vec4(tint * (0.25 + 0.75 * lambert), 1.0);

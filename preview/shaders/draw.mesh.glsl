@@ -23,10 +23,10 @@ void main() {
     uint k = payload.first + gl_WorkGroupID.x;
     uvec2 entry = visible[k];
     Cluster c = clusters[entry.x];
-    vec3 t = instances[entry.y].xyz;
+    Instance inst = instances[entry.y];
     SetMeshOutputsEXT(c.vertex_count, c.triangle_count);
     for (uint v = gl_LocalInvocationIndex; v < c.vertex_count; v += gl_WorkGroupSize.x) {
-        precise vec3 p = decode_position(c, v) + t;
+        precise vec3 p = to_world(inst, decode_position(c, v, inst.grid));
         world_position[v] = p;
         slot[v] = k;
         precise vec4 clip = view.view_proj * vec4(p, 1.0);
@@ -36,6 +36,8 @@ void main() {
     uint index_block = page + page_words[((page + c.header_offset) >> 2) + 8u];
     for (uint tri = gl_LocalInvocationIndex; tri < c.triangle_count; tri += gl_WorkGroupSize.x) {
         uint at = index_block + 3u * tri;
-        gl_PrimitiveTriangleIndicesEXT[tri] = uvec3(read_u8(at), read_u8(at + 1u), read_u8(at + 2u));
+        uvec3 corners = uvec3(read_u8(at), read_u8(at + 1u), read_u8(at + 2u));
+        // A mirroring transform reverses the winding: reverse it back.
+        gl_PrimitiveTriangleIndicesEXT[tri] = inst.mirrored != 0u ? corners.xzy : corners;
     }
 }

@@ -18,7 +18,8 @@ void main() {
     uint index = uint(gl_VertexIndex);
     uvec2 entry = visible[index >> 8];
     Cluster c = clusters[entry.x];
-    precise vec3 p = decode_position(c, index & 0xFFu) + instances[entry.y].xyz;
+    Instance inst = instances[entry.y];
+    precise vec3 p = to_world(inst, decode_position(c, index & 0xFFu, inst.grid));
     world_position = p;
     slot = index >> 8;
     gl_Position = view.view_proj * vec4(p, 1.0);

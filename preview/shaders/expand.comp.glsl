@@ -20,6 +20,7 @@ void main() {
     uint count = min(counters.visible_count, view.visible_capacity);
     for (uint k = gl_WorkGroupID.x; k < count; k += gl_NumWorkGroups.x) {
         uint ci = visible[k].x;
+        bool mirrored = instances[visible[k].y].mirrored != 0u;
         Cluster c = clusters[ci];
         uint n = 3u * c.triangle_count;
         if (gl_LocalInvocationIndex == 0u) {
@@ -36,7 +37,10 @@ void main() {
             uint page = page_base[c.page];
             uint index_block = page + page_words[((page + c.header_offset) >> 2) + 8u];
             for (uint j = gl_LocalInvocationIndex; j < n; j += gl_WorkGroupSize.x) {
-                indices[base + j] = (k << 8) | read_u8(index_block + j);
+                // A mirroring transform reverses the winding: swap each triangle's last two.
+                uint corner = j % 3u;
+                uint source = mirrored && corner != 0u ? j + 3u - 2u * corner : j;
+                indices[base + j] = (k << 8) | read_u8(index_block + source);
             }
         }
         // `first` is rewritten by the next cluster.

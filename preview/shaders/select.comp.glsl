@@ -2,8 +2,10 @@
 // Per-cluster LOD selection (FORMAT.md §6): one workgroup per work item of the culling pass
 // (an instance and a range of its clusters); its invocations stride over the range. A cluster
 // is drawn iff projected(own) <= tau < projected(parent), with the eye moved into the
-// instance's object space, optionally frustum-culled against the parent sphere (which bounds
-// the cluster's geometry); it is appended to the visible list as (cluster, instance).
+// instance's object space (and z_near and the result scaled by the instance's factors, which
+// are 1 for a translation), optionally frustum-culled against the parent sphere moved into the
+// world (which bounds the cluster's geometry); it is appended to the visible list as (cluster,
+// instance).
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 
@@ -23,20 +25,21 @@ void main() {
     }
     uvec4 item = work[w];
     uint instance = item.x;
-    vec3 t = instances[instance].xyz;
-    precise vec3 eye = view.eye - t;
+    Instance inst = instances[instance];
+    vec3 eye = to_object(inst, view.eye);
+    precise float z_near = view.z_near * inst.near_scale;
     for (uint j = item.y + gl_LocalInvocationID.x; j < item.y + item.z; j += gl_WorkGroupSize.x) {
         uint i = level_order[j];
         Cluster c = clusters[i];
-        float own = projected_error(c.own_sphere, c.own_error, eye);
-        float parent = projected_error(c.parent_sphere, c.parent_error, eye);
+        precise float own = projected_error(c.own_sphere, c.own_error, eye, z_near) * inst.error_scale;
+        precise float parent = projected_error(c.parent_sphere, c.parent_error, eye, z_near) * inst.error_scale;
         if ((view.flags & FLAG_WRITE_PROJECTED) != 0u && instance == 0u) {
             projected[i] = vec2(own, parent);
         }
         if (!(own <= view.tau && view.tau < parent)) {
             continue;
         }
-        if ((view.flags & FLAG_FRUSTUM_CULL) != 0u && !sphere_in_frustum(vec4(c.parent_sphere.xyz + t, c.parent_sphere.w))) {
+        if ((view.flags & FLAG_FRUSTUM_CULL) != 0u && !sphere_in_frustum(vec4(to_world(inst, c.parent_sphere.xyz), c.parent_sphere.w * inst.radius_scale))) {
             continue;
         }
         // Test hook: drop every fifth selected cluster, so that tests can show the crack test

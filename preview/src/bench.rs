@@ -199,3 +199,53 @@ pub fn run_bench(
         "lod_chain_levels": chain.levels.iter().map(|l| json!({"triangles": l.index_count / 3, "error": l.error})).collect::<Vec<_>>(),
     }))
 }
+
+/// The DAG frames of a scene file's instances along the benchmark's camera path around the
+/// scene's world bounds: GPU pass times, clusters and triangles per frame (the discrete-LOD
+/// alternatives need one mesh, so they are not run).
+pub fn run_scene_bench(
+    dag: &mut Renderer,
+    scene: &crate::instances::LoadedScene,
+    frames: u32,
+    width: u32,
+    height: u32,
+    tau: f32,
+) -> Result<Value> {
+    let r = scene.bounds.radius;
+    let c = scene.bounds.center;
+    let (mut total, mut wall, mut clusters, mut tris) =
+        (Stats::default(), Stats::default(), Stats::default(), Stats::default());
+    let mut dropped = 0u64;
+    for i in 0..frames + 3 {
+        // A quarter circle at 1.5 to 3 radii, looking at the centre.
+        let a = std::f32::consts::FRAC_PI_2 * i.saturating_sub(3) as f32 / frames.max(1) as f32;
+        let orbit = r * (1.5 + 1.5 * a / std::f32::consts::FRAC_PI_2);
+        let eye = [c[0] + orbit * a.cos(), c[1] + 0.5 * r, c[2] + orbit * a.sin()];
+        let camera = Camera { eye, target: c, proj_y: proj_y(DEFAULT_FOV_Y), z_near: r * 1e-3, width, height };
+        let view = camera.gpu_view(tau, &scene.data.grid, scene.data.clusters.len() as u32, FLAG_FRUSTUM_CULL);
+        let started = Instant::now();
+        let frame = dag.render_without_readback(&view, width, height)?;
+        let elapsed = started.elapsed().as_secs_f64() * 1e3;
+        if i < 3 {
+            continue;
+        }
+        wall.push(elapsed);
+        clusters.push(frame.clusters as f64);
+        tris.push(frame.triangles as f64);
+        dropped += frame.dropped as u64;
+        if let Some(t) = frame.times {
+            total.push(t.select_ms + t.expand_ms + t.draw_ms);
+        }
+    }
+    Ok(json!({
+        "path": dag.path_name(),
+        "instances": scene.instances.len(),
+        "meshes": scene.files.len(),
+        "frames": frames,
+        "gpu_ms_total": total.json(),
+        "wall_ms": wall.json(),
+        "clusters": clusters.json(),
+        "triangles": tris.json(),
+        "dropped_clusters": dropped,
+    }))
+}

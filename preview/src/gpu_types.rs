@@ -105,6 +105,43 @@ pub struct GpuLevelBin {
     pub max_parent_error: f32,
 }
 
+/// One placement of a mesh (GLSL `Instance`, std430, 176 bytes): its transform, what the
+/// selection needs in the mesh's object space (docs/FORMAT.md "Scene file" gives the rule and
+/// why it is conservative; `crate::instances` builds these), and which mesh it places.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuInstance {
+    /// Object to world, column-major (`model[col][row]`), affine.
+    pub model: [[f32; 4]; 4],
+    /// Rows 0..3 of the inverse (world to object): `object.x = dot(row0.xyz, world) + row0.w`.
+    pub inverse_row0: [f32; 4],
+    /// Row 1 of the inverse.
+    pub inverse_row1: [f32; 4],
+    /// Row 2 of the inverse.
+    pub inverse_row2: [f32; 4],
+    /// The mesh's position grid: origin xyz, step w (FORMAT.md §2).
+    pub grid: [f32; 4],
+    /// The mesh's culling centre xyz (object space, `SceneData::bounds`) and `model_far` w.
+    pub center: [f32; 4],
+    /// The mesh's `model_near` (object space).
+    pub model_near: f32,
+    /// `s_max / s_min` of the upper 3×3 (1 for a rigid motion with uniform scale): multiplies
+    /// every object-space projected error.
+    pub error_scale: f32,
+    /// `1 / s_min`: the view's `z_near` in object space is `z_near * near_scale`.
+    pub near_scale: f32,
+    /// `s_max`: world radius of an object-space sphere of radius 1.
+    pub radius_scale: f32,
+    /// The mesh's first level bin (index into the bin buffer).
+    pub bin_first: u32,
+    /// The mesh's level bins.
+    pub bin_count: u32,
+    /// 1 if the transform mirrors (negative determinant): triangles are drawn reversed.
+    pub mirrored: u32,
+    /// The mesh (index into `SceneData::parts`).
+    pub mesh: u32,
+}
+
 /// `GpuView::flags`: cull clusters whose parent sphere is outside the frustum.
 pub const FLAG_FRUSTUM_CULL: u32 = 1;
 /// `GpuView::flags`: write every cluster's (own, parent) projected error for diagnostics.
@@ -276,6 +313,14 @@ mod tests {
         assert_eq!(size_of::<ash::vk::DrawMeshTasksIndirectCommandEXT>(), 12);
         assert_eq!(MESH_ARGS_OFFSET % 4, 0);
         assert_eq!(SELECT_ARGS_OFFSET % 4, 0);
+    }
+
+    #[test]
+    fn instance_matches_glsl_std430() {
+        let m = members!(GpuInstance: model, inverse_row0, inverse_row1, inverse_row2, grid, center, model_near,
+            error_scale, near_scale, radius_scale, bin_first, bin_count, mirrored, mesh);
+        check("Instance", false, &m, size_of::<GpuInstance>());
+        assert_eq!(size_of::<GpuInstance>(), 176);
     }
 
     #[test]

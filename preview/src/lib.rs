@@ -2,7 +2,9 @@
 //! (docs/ARCHITECTURE.md, "preview").
 //!
 //! - [`scene`] flattens a file into GPU inputs: one [`gpu_types::GpuCluster`] per cluster and
-//!   the decompressed pages as is, with a page base table.
+//!   the decompressed pages as is, with a page base table; several files merge into one.
+//! - [`instances`] places meshes by transforms ([`gpu_types::GpuInstance`]), with the CPU twin
+//!   of the selection under a transform, and loads scene files.
 //! - [`vk`] holds every `unsafe` Vulkan call: the context, the owners of each object, and the
 //!   [`vk::Renderer`] that runs the selection compute pass and the fallback draw
 //!   (compute-expanded index buffer + indirect indexed draw).
@@ -18,6 +20,7 @@ pub mod exposed;
 pub mod fly;
 pub mod gpu_types;
 pub mod image;
+pub mod instances;
 pub mod lod_chain;
 pub mod scene;
 pub mod verify;

@@ -20,7 +20,8 @@ use serde_json::json;
 #[derive(Parser, Debug)]
 #[command(version, after_help = WINDOW_KEYS)]
 struct Args {
-    /// The .mres file.
+    /// The .mres file, or a scene file (NAME.scene.json, docs/FORMAT.md "Scene file"): every
+    /// mesh it lists drawn by each of its instances (headless only).
     file: PathBuf,
     /// Render offscreen (no window): needed for --verify and --bench, and where no display is.
     /// Without it, a window opens (X11 DISPLAY or WAYLAND_DISPLAY must be set).
@@ -208,7 +209,115 @@ fn run_window(args: &Args) -> Result<ExitCode> {
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }
 
+fn is_scene_file(path: &std::path::Path) -> bool {
+    path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.ends_with(mres_import::scene::SCENE_SUFFIX))
+}
+
+/// `preview NAME.scene.json --headless`: a screenshot, the DAG frames of the benchmark path,
+/// and the instanced selection check, for every instance of every mesh of the scene.
+fn run_scene(args: &Args) -> Result<ExitCode> {
+    if !args.headless {
+        bail!("{}: scene files are drawn headless only (give --headless)", args.file.display());
+    }
+    if !args.verify && args.out.is_none() && !args.bench {
+        bail!("nothing to do: give --verify, --out PNG and/or --bench");
+    }
+    let size = args.size.as_deref().unwrap_or(if args.bench { "1920x1080" } else { "512x512" });
+    let (width, height) = parse_size(size)?;
+    let scene = preview::instances::load_scene(&args.file)?;
+    let device = Device::new(&ContextOptions {
+        validation: args.validate,
+        device_name: args.device.clone(),
+        allow_mesh_shaders: args.path != PathArg::Fallback,
+        display: None,
+    })?;
+    let counts = device.counts.clone();
+    println!("device: {}", device.info.summary());
+    println!(
+        "scene: {} meshes, {} instances, {} clusters, {} level-0 triangles in the meshes",
+        scene.files.len(),
+        scene.instances.len(),
+        scene.data.clusters.len(),
+        scene.data.level0_triangles
+    );
+    let options = RendererOptions {
+        naive_arithmetic: args.naive_arithmetic,
+        path: path_choice(args.path),
+        instances: scene.instances.clone(),
+        ..Default::default()
+    };
+    let mut renderer = Renderer::new(&device, &scene.data, options)?;
+    println!("draw path: {}", renderer.path_name());
+    let n = scene.data.clusters.len() as u32;
+    let mut ok = true;
+    let mut report_json = json!({"file": args.file.display().to_string(), "path": renderer.path_name()});
+    if let Some(out) = &args.out {
+        let camera = match &args.camera {
+            Some(c) => Camera::looking_at(parse_vec3(c)?, &scene.bounds, width, height),
+            None => Camera::framing(&scene.bounds, width, height),
+        };
+        let mut view = camera.gpu_view(args.tau, &scene.data.grid, n, FLAG_FRUSTUM_CULL);
+        view.mode = args.mode.gpu();
+        let frame = renderer.render(&view, width, height)?;
+        write_png(out, frame.width, frame.height, &frame.rgba)?;
+        println!(
+            "screenshot: {} ({}x{}, eye {:?}, tau {} px): {} clusters, {} triangles",
+            out.display(),
+            frame.width,
+            frame.height,
+            camera.eye,
+            args.tau,
+            frame.clusters,
+            frame.triangles
+        );
+    }
+    if args.bench {
+        let frames = args.frames.unwrap_or(60).max(1);
+        let bench = preview::bench::run_scene_bench(&mut renderer, &scene, frames, width, height, args.tau)?;
+        println!("bench: {}", serde_json::to_string(&bench)?);
+        if let Some(path) = &args.json {
+            std::fs::write(path, serde_json::to_string_pretty(&bench)? + "\n")
+                .with_context(|| format!("cannot write {}", path.display()))?;
+        }
+        report_json["bench"] = bench;
+    }
+    if args.verify {
+        let options = VerifyOptions { selection_cameras: args.cameras, width, height, ..VerifyOptions::default() };
+        let report = preview::verify::verify_scene(&mut renderer, &scene, &options)?;
+        println!(
+            "instanced selection: {} runs, {} mismatched runs, {} mismatched (cluster, instance) entries, {} lists with duplicates; {}..{} entries per run",
+            report.runs,
+            report.mismatched_runs,
+            report.mismatched_entries,
+            report.duplicate_lists,
+            report.min_selected,
+            report.max_selected
+        );
+        ok &= report.passed();
+        report_json["verify"] = json!({"runs": report.runs, "mismatched_runs": report.mismatched_runs,
+            "mismatched_entries": report.mismatched_entries, "duplicate_lists": report.duplicate_lists});
+    }
+    drop(renderer);
+    drop(device);
+    if args.validate {
+        println!("validation messages: {} errors, {} warnings", counts.errors(), counts.warnings());
+        ok &= counts.errors() == 0 && counts.warnings() == 0;
+    }
+    report_json["passed"] = json!(ok);
+    if let Some(path) = &args.report {
+        std::fs::write(path, serde_json::to_string_pretty(&report_json)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    if args.verify || args.validate {
+        println!("{}", if ok { "PASS" } else { "FAIL" });
+    }
+    Ok(if ok { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
 fn run(args: Args) -> Result<ExitCode> {
+    if is_scene_file(&args.file) {
+        return run_scene(&args);
+    }
     if !args.headless {
         return run_window(&args);
     }
@@ -256,7 +365,11 @@ fn run(args: Args) -> Result<ExitCode> {
         let mut dag = Renderer::new(
             &device,
             &scene,
-            RendererOptions { path, instances: instances.clone(), ..Default::default() },
+            RendererOptions {
+                path,
+                instances: instances.iter().map(|&t| preview::instances::translated(&scene, 0, t)).collect(),
+                ..Default::default()
+            },
         )?;
         println!("draw path: {}", dag.path_name());
         let mut chain_renderer = preview::vk::ChainRenderer::new(&device, &chain, &instances)?;

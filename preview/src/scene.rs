@@ -1,6 +1,7 @@
 //! The GPU inputs of one `.mres` file, built on the CPU: the flattened hierarchy (one
 //! [`GpuCluster`] per cluster) and every decompressed page as is (FORMAT.md §5) with a table
-//! of page base offsets.
+//! of page base offsets. The inputs of several files (a scene file's meshes) are concatenated
+//! by [`SceneData::merge`], each file one [`MeshPart`].
 
 use anyhow::{bail, Context as _, Result};
 use mres_format::{Grid, MresFile, Sphere, NO_GROUP};
@@ -10,7 +11,28 @@ use crate::gpu_types::{GpuCluster, GpuLevelBin};
 /// Largest cluster index an index-buffer entry `(cluster << 8) | vertex` can carry.
 pub const MAX_CLUSTERS: usize = 1 << 24;
 
-/// What the GPU needs of a file.
+/// Where one file's data lies in a [`SceneData`], and what instances of it need.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeshPart {
+    /// First cluster (index into [`SceneData::clusters`]).
+    pub cluster_first: u32,
+    /// Its clusters.
+    pub cluster_count: u32,
+    /// First level bin (index into [`SceneData::bins`]).
+    pub bin_first: u32,
+    /// Its level bins.
+    pub bin_count: u32,
+    /// The file's position grid.
+    pub grid: Grid,
+    /// The file's [`SceneData::bounds`] (object space).
+    pub bounds: Sphere,
+    /// The file's [`SceneData::model_far`].
+    pub model_far: f32,
+    /// The file's [`SceneData::model_near`].
+    pub model_near: f32,
+}
+
+/// What the GPU needs of a file (or of several, [`SceneData::merge`]).
 #[derive(Clone, Debug)]
 pub struct SceneData {
     /// One record per cluster, in file order.
@@ -41,6 +63,9 @@ pub struct SceneData {
     /// Largest `|c - bounds.center| + r` over the group spheres, padded: a sphere of this radius
     /// around `bounds.center` holds every group sphere (object space).
     pub model_near: f32,
+    /// One part per file: one for [`SceneData::from_file`]. The single-file fields above
+    /// (grid, bounds, model extent) are the first part's.
+    pub parts: Vec<MeshPart>,
 }
 
 /// The level order and one bin per level (levels without clusters get empty bins).
@@ -133,7 +158,18 @@ impl SceneData {
         let bounds = points_bounds(&level0_positions).unwrap_or_else(|| model_bounds(file));
         let (level_order, bins) = level_bins(&clusters);
         let (model_far, model_near) = model_extent(file, bounds.center);
+        let part = MeshPart {
+            cluster_first: 0,
+            cluster_count: clusters.len() as u32,
+            bin_first: 0,
+            bin_count: bins.len() as u32,
+            grid: file.header.grid,
+            bounds,
+            model_far,
+            model_near,
+        };
         Ok(SceneData {
+            parts: vec![part],
             level_order,
             bins,
             model_far,
@@ -147,6 +183,52 @@ impl SceneData {
             bounds,
             level0_triangles,
         })
+    }
+}
+
+impl SceneData {
+    /// The files of `parts` (each from [`SceneData::from_file`]) in one set of buffers: clusters,
+    /// pages, level order and bins concatenated, each cluster's page and group and each bin's
+    /// level-order range moved by what comes before it. The single-file fields are the first
+    /// file's.
+    pub fn merge(parts: Vec<SceneData>) -> Result<SceneData> {
+        let mut parts = parts.into_iter();
+        let Some(mut out) = parts.next() else { bail!("a scene needs at least one mesh") };
+        for part in parts {
+            let cluster_offset = out.clusters.len() as u32;
+            let page_offset = out.page_bases.len() as u32;
+            let group_offset = out.clusters.iter().map(|c| c.group + 1).max().unwrap_or(0);
+            let byte_offset = u32::try_from(out.pages.len()).context("decompressed pages exceed 4 GiB")?;
+            let order_offset = out.level_order.len() as u32;
+            let bin_offset = out.bins.len() as u32;
+            out.clusters.extend(part.clusters.iter().map(|c| GpuCluster {
+                page: c.page + page_offset,
+                group: c.group + group_offset,
+                ..*c
+            }));
+            if out.clusters.len() >= MAX_CLUSTERS {
+                bail!(
+                    "{} clusters: the fallback index encoding holds at most {}",
+                    out.clusters.len(),
+                    MAX_CLUSTERS - 1
+                );
+            }
+            for base in &part.page_bases {
+                out.page_bases.push(base.checked_add(byte_offset).context("decompressed pages exceed 4 GiB")?);
+            }
+            out.pages.extend_from_slice(&part.pages);
+            u32::try_from(out.pages.len()).context("decompressed pages exceed 4 GiB")?;
+            out.level_order.extend(part.level_order.iter().map(|&i| i + cluster_offset));
+            out.bins.extend(part.bins.iter().map(|b| GpuLevelBin { first: b.first + order_offset, ..*b }));
+            out.index_capacity += part.index_capacity;
+            out.level0_triangles += part.level0_triangles;
+            out.parts.extend(part.parts.iter().map(|p| MeshPart {
+                cluster_first: p.cluster_first + cluster_offset,
+                bin_first: p.bin_first + bin_offset,
+                ..*p
+            }));
+        }
+        Ok(out)
     }
 }
 

@@ -603,3 +603,79 @@ fn window(x: usize, y: usize, w: usize, h: usize, radius: i64) -> impl Iterator<
         .filter(move |&(px, py)| px >= 0 && py >= 0 && px < w as i64 && py < h as i64)
         .map(|(px, py)| (px as usize, py as usize))
 }
+
+/// What [`verify_scene`] found.
+#[derive(Clone, Debug, Default)]
+pub struct SceneVerifyReport {
+    /// Selections compared (cameras × thresholds).
+    pub runs: usize,
+    /// Runs whose GPU (cluster, instance) set differs from the CPU reference.
+    pub mismatched_runs: usize,
+    /// (cluster, instance) entries in one set and not the other, over all runs.
+    pub mismatched_entries: usize,
+    /// Runs whose GPU list holds an entry twice.
+    pub duplicate_lists: usize,
+    /// Fewest and most entries selected by one run.
+    pub min_selected: usize,
+    /// See `min_selected`.
+    pub max_selected: usize,
+}
+
+impl SceneVerifyReport {
+    /// Whether every selection matched and no list had duplicates.
+    pub fn passed(&self) -> bool {
+        self.runs > 0 && self.mismatched_runs == 0 && self.duplicate_lists == 0
+    }
+}
+
+/// Proves the instanced selection of a scene: for `options.selection_cameras` cameras around
+/// the scene and every `options.taus`, the GPU's visible (cluster, instance) pairs, frustum
+/// culling off, equal the CPU twin's (`instances::instance_projected` on every cluster of every
+/// instance's mesh: own ≤ τ < parent). Each mesh file on its own is proven by [`verify`].
+pub fn verify_scene(
+    renderer: &mut Renderer,
+    scene: &crate::instances::LoadedScene,
+    options: &VerifyOptions,
+) -> Result<SceneVerifyReport> {
+    use crate::instances::instance_projected;
+    let mut report = SceneVerifyReport { min_selected: usize::MAX, ..Default::default() };
+    let data = &scene.data;
+    let n = data.clusters.len() as u32;
+    let sphere = |s: [f32; 4]| mres_format::Sphere { center: [s[0], s[1], s[2]], radius: s[3] };
+    for eye in selection_eyes(&scene.bounds, options.selection_cameras, options.seed) {
+        let camera = Camera::looking_at(eye, &scene.bounds, options.width, options.height);
+        let params = camera.view_params();
+        for &tau in &options.taus {
+            let selection = renderer.select(&camera.gpu_view(tau, &data.grid, n, 0))?;
+            let mut gpu: Vec<(u32, u32)> = selection.visible.iter().copied().zip(selection.instances).collect();
+            gpu.sort_unstable();
+            let listed = gpu.len();
+            gpu.dedup();
+            report.duplicate_lists += usize::from(gpu.len() != listed);
+            let mut cpu = Vec::new();
+            for (j, inst) in scene.instances.iter().enumerate() {
+                let part = &data.parts[inst.mesh as usize];
+                for c in part.cluster_first..part.cluster_first + part.cluster_count {
+                    let cluster = &data.clusters[c as usize];
+                    let own = instance_projected(inst, &params, &sphere(cluster.own_sphere), cluster.own_error);
+                    let parent =
+                        instance_projected(inst, &params, &sphere(cluster.parent_sphere), cluster.parent_error);
+                    if own <= tau && tau < parent {
+                        cpu.push((c, j as u32));
+                    }
+                }
+            }
+            cpu.sort_unstable();
+            report.runs += 1;
+            report.min_selected = report.min_selected.min(cpu.len());
+            report.max_selected = report.max_selected.max(cpu.len());
+            if cpu != gpu {
+                report.mismatched_runs += 1;
+                let only_cpu = cpu.iter().filter(|e| gpu.binary_search(e).is_err()).count();
+                let only_gpu = gpu.iter().filter(|e| cpu.binary_search(e).is_err()).count();
+                report.mismatched_entries += only_cpu + only_gpu;
+            }
+        }
+    }
+    Ok(report)
+}

@@ -526,3 +526,88 @@ fn window_under_xvfb_shows_the_headless_image() {
     assert_eq!(count_flagged(&window.2), 0);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A scene file of two cube meshes placed by 70 instances (more than one culling workgroup):
+/// translations, rotations, non-uniform scales and mirrors. Returns the scene file's path.
+fn write_cube_scene(dir: &std::path::Path) -> std::path::PathBuf {
+    std::fs::write(dir.join("a.mres"), write_mres(&cube_dag(6), 3).unwrap()).unwrap();
+    std::fs::write(dir.join("b.mres"), write_mres(&cube_dag(2), 3).unwrap()).unwrap();
+    let mut instances = Vec::new();
+    for i in 0..70 {
+        let (x, z) = ((i % 10) as f32 * 3.0 - 15.0, (i / 10) as f32 * 3.0 - 10.0);
+        let angle = i as f32 * 0.37;
+        let (c, s) = (angle.cos(), angle.sin());
+        let scale = [1.0 + (i % 3) as f32 * 0.5, 1.0, 0.5 + (i % 4) as f32 * 0.25];
+        let mirror = if i % 7 == 0 { -1.0 } else { 1.0 };
+        let m = [
+            c * scale[0] * mirror,
+            0.0,
+            -s * scale[0] * mirror,
+            0.0,
+            0.0,
+            scale[1],
+            0.0,
+            0.0,
+            s * scale[2],
+            0.0,
+            c * scale[2],
+            0.0,
+            x,
+            0.0,
+            z,
+            1.0,
+        ];
+        let t: Vec<String> = m.iter().map(|v| v.to_string()).collect();
+        instances.push(format!(r#"{{"name":"i{i}","mesh":{},"transform":[{}]}}"#, i % 2, t.join(",")));
+    }
+    let text = format!(
+        r#"{{"version":1,"meshes":[{{"file":"a.mres","materials":[]}},{{"file":"b.mres","materials":[]}}],"instances":[{}]}}"#,
+        instances.join(",")
+    );
+    let path = dir.join("cubes.scene.json");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn instanced_selection_equals_the_cpu_twin_for_every_transform() {
+    let Some((device, counts)) = device("scene") else { return };
+    let dir = std::env::temp_dir().join(format!("mres-preview-scene-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = preview::instances::load_scene(&write_cube_scene(&dir)).unwrap();
+    assert_eq!(scene.instances.len(), 70);
+    assert!(scene.instances.iter().any(|i| i.mirrored == 1) && scene.instances.iter().any(|i| i.error_scale > 1.5));
+    for path in [DrawPath::Fallback, DrawPath::Mesh] {
+        if path == DrawPath::Mesh && !device.info.mesh_shader_enabled {
+            continue;
+        }
+        let options = RendererOptions { path, instances: scene.instances.clone(), ..Default::default() };
+        let mut renderer = Renderer::new(&device, &scene.data, options).unwrap();
+        let options = VerifyOptions { selection_cameras: 30, width: 128, height: 128, ..Default::default() };
+        let report = preview::verify::verify_scene(&mut renderer, &scene, &options).unwrap();
+        assert!(report.passed(), "{path:?}: {report:?}");
+        assert_eq!(report.runs, 120);
+        // Every instance is drawn (at least its root) where no frustum culling applies.
+        assert!(report.min_selected >= 70, "{report:?}");
+    }
+    assert_silent(&counts);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_truncated_scene_file_fails_naming_it() {
+    let dir = std::env::temp_dir().join(format!("mres-preview-bad-scene-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = write_cube_scene(&dir);
+    let text = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &text[..text.len() / 2]).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_preview"))
+        .arg(&path)
+        .args(["--headless", "--verify"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains(&path.display().to_string()) && stderr.contains("invalid scene file"), "{stderr}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -179,8 +179,16 @@ fn percent_decode(uri: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-/// The `.mres` files under `dir` that are not in `expected`: outputs of assets renamed or
-/// deleted since they were baked. Sorted; empty if `dir` does not exist.
+/// Whether `path` is something a batch writes: a `.mres` or a scene file.
+fn is_output(path: &Path) -> bool {
+    let scene =
+        path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.ends_with(mres_import::scene::SCENE_SUFFIX));
+    scene || path.extension().is_some_and(|e| e == "mres")
+}
+
+/// The outputs (`.mres` and scene files) under `dir` that are not in `expected`: outputs of
+/// assets renamed or deleted (or no longer instanced) since they were baked. Sorted; empty if
+/// `dir` does not exist.
 pub fn stale_outputs(dir: &Path, expected: &HashSet<PathBuf>) -> std::io::Result<Vec<PathBuf>> {
     fn walk(dir: &Path, expected: &HashSet<PathBuf>, stale: &mut Vec<PathBuf>) -> std::io::Result<()> {
         for entry in
@@ -189,7 +197,7 @@ pub fn stale_outputs(dir: &Path, expected: &HashSet<PathBuf>) -> std::io::Result
             let path = entry?.path();
             if path.is_dir() {
                 walk(&path, expected, stale)?;
-            } else if path.extension().is_some_and(|e| e == "mres") && !expected.contains(&path) {
+            } else if is_output(&path) && !expected.contains(&path) {
                 stale.push(path);
             }
         }

@@ -338,12 +338,14 @@ fn stale_outputs_are_listed_and_pruned_and_nothing_else_is_touched() {
     std::fs::write(t.out.join("notes.txt"), "keep").unwrap();
     let report = t.bake(&["--no-cache"]);
     let stale = t.out.join("ball.mres");
-    assert_eq!(report["stale"], serde_json::json!([stale.to_str().unwrap()]));
+    // The generated OBJ names its material (`usemtl m0`), so it has a scene file too.
+    let stale_scene = t.out.join("ball.scene.json");
+    assert_eq!(report["stale"], serde_json::json!([stale.to_str().unwrap(), stale_scene.to_str().unwrap()]));
     assert!(stale.is_file(), "listed, not deleted, without --prune");
     let (code, msg) = bake_all(&[t.assets.to_str().unwrap(), "-o", t.out.to_str().unwrap(), "--no-cache"]);
     assert_eq!(code, Some(0));
     assert!(
-        msg.contains("warning: 1 stale .mres files") && msg.contains("ball.mres") && msg.contains("--prune"),
+        msg.contains("warning: 2 stale .mres/scene files") && msg.contains("ball.mres") && msg.contains("--prune"),
         "{msg}"
     );
     // A subfolder's batch only looks at its own part of the output directory.
@@ -352,8 +354,8 @@ fn stale_outputs_are_listed_and_pruned_and_nothing_else_is_touched() {
     assert!(!msg.contains("stale"), "{msg}");
 
     let report = t.bake(&["--no-cache", "--prune"]);
-    assert_eq!(report["pruned"], serde_json::json!([stale.to_str().unwrap()]));
-    assert!(!stale.exists());
+    assert_eq!(report["pruned"], serde_json::json!([stale.to_str().unwrap(), stale_scene.to_str().unwrap()]));
+    assert!(!stale.exists() && !stale_scene.exists());
     assert!(t.out.join("ball2.mres").is_file() && t.out.join("notes.txt").is_file());
     assert_eq!(walk(&t.out).len(), 4);
 }

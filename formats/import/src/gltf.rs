@@ -28,21 +28,19 @@ use super::{
     asset_dir, check_triangle_count, check_vertex_count, read_file, resolve_inside, ImportErrorKind, ImportLimits,
     InputKind, KindResult, MeshBuilder,
 };
+use crate::scene::{ImportedScene, Mat4, SceneInstance, SceneMesh, IDENTITY};
 use crate::SourceMesh;
 
 /// Most node instances a scene may expand to. A node graph that reuses nodes (a DAG) can
 /// expand exponentially; real scenes stay far below this.
 const MAX_NODE_INSTANCES: u64 = 1 << 24;
 
-/// Column-major 4×4 matrix, as glTF stores it (`m[column][row]`).
-type Mat4 = [[f32; 4]; 4];
-
-const IDENTITY: Mat4 = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
-
 /// One mesh placed in the scene.
 struct Instance {
     mesh: usize,
     transform: Mat4,
+    /// The node that places it (`None` for a file without scenes, which places every mesh once).
+    node: Option<usize>,
 }
 
 /// What the checks found: what to read and how much of it there is.
@@ -51,6 +49,11 @@ struct Plan {
     primitives: Vec<Vec<usize>>,
     has_normals: bool,
     has_uvs: bool,
+    /// Per mesh index, whether all its read primitives have normals / UVs (the scene import
+    /// decides attributes per mesh, so that a mesh's content does not depend on the others).
+    mesh_attributes: Vec<(bool, bool)>,
+    /// Per mesh index, (vertices, triangles) of one copy: capacity hints.
+    mesh_sizes: Vec<(u64, u64)>,
     /// Per buffer index, whether a checked accessor reads from it.
     used_buffers: Vec<bool>,
     vertices: u64,
@@ -70,6 +73,94 @@ pub(super) fn import(path: &Path, bytes: &[u8], kind: InputKind, limits: &Import
     let instances = scene_instances(&document, &plan)?;
     let buffers = load_buffers(&document, &plan, &asset_dir(path), bin, limits)?;
     read_mesh(&document, &instances, &plan, &buffers)
+}
+
+/// Imports a `.gltf` or `.glb` as a scene. If some mesh is placed by two or more nodes, every
+/// mesh is read once in its local space and placed by instances; a scene without instancing
+/// gives [`import`]'s flattened mesh and one identity instance (policy and reasons on
+/// `crate::scene`).
+pub(super) fn import_scene(
+    path: &Path,
+    bytes: &[u8],
+    kind: InputKind,
+    limits: &ImportLimits,
+) -> KindResult<ImportedScene> {
+    let (json_bytes, bin) = split_container(bytes, kind)?;
+    let document = parse_document(json_bytes)?;
+    let plan = plan(&document, &mesh_instance_counts(&document)?, limits)?;
+    let instances = scene_instances(&document, &plan)?;
+    let buffers = load_buffers(&document, &plan, &asset_dir(path), bin, limits)?;
+    let material_names = document.materials().map(|m| m.name().map(str::to_owned)).collect();
+    let mut scene = ImportedScene { meshes: Vec::new(), instances: Vec::new(), material_names };
+    let mut uses = vec![0usize; document.meshes().len()];
+    for instance in &instances {
+        uses[instance.mesh] += 1;
+    }
+    let stem = path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    if uses.iter().all(|&n| n < 2) {
+        let mesh = read_mesh(&document, &instances, &plan, &buffers)?;
+        scene.meshes.push(SceneMesh { mesh, gltf_mesh: None });
+        scene.instances.push(SceneInstance { name: stem, node: None, mesh: 0, transform: IDENTITY });
+        return Ok(scene);
+    }
+    let mut dropped = 0;
+    // Degenerate-only meshes are dropped, as flattening would drop their triangles.
+    let mut keep = |result: KindResult<SourceMesh>| match result {
+        Ok(mesh) => Ok(Some(mesh)),
+        Err(ImportErrorKind::NoTriangles { degenerate_dropped }) => {
+            dropped += degenerate_dropped;
+            Ok(None)
+        }
+        Err(e) => Err(e),
+    };
+    // Every mesh once, in order of first placement; instances in depth-first node order.
+    let mut slot: Vec<Option<Option<usize>>> = vec![None; uses.len()];
+    for instance in &instances {
+        let mesh_slot = match slot[instance.mesh] {
+            Some(known) => known,
+            None => {
+                let read = keep(read_local(&document, instance.mesh, &plan, &buffers))?;
+                let known = read.map(|mesh| {
+                    scene.meshes.push(SceneMesh { mesh, gltf_mesh: Some(instance.mesh) });
+                    scene.meshes.len() - 1
+                });
+                slot[instance.mesh] = Some(known);
+                known
+            }
+        };
+        if let Some(mesh) = mesh_slot {
+            let node = instance.node;
+            let name = node_name(&document, node);
+            scene.instances.push(SceneInstance { name, node, mesh, transform: instance.transform });
+        }
+    }
+    if scene.meshes.is_empty() {
+        return Err(ImportErrorKind::NoTriangles { degenerate_dropped: dropped });
+    }
+    Ok(scene)
+}
+
+/// A node's name, or `node N` for an unnamed one.
+fn node_name(document: &Document, node: Option<usize>) -> String {
+    let Some(index) = node else { return String::new() };
+    let named = document.nodes().nth(index).and_then(|n| n.name().map(str::to_owned));
+    named.unwrap_or_else(|| format!("node {index}"))
+}
+
+/// The names of the glTF's materials, by index (`None` where unnamed), and whether
+/// [`import_scene`] would find a mesh placed twice; from the JSON and accessor checks only,
+/// no buffer is read.
+pub(super) fn outline(bytes: &[u8], kind: InputKind) -> KindResult<(Vec<Option<String>>, bool)> {
+    if bytes.is_empty() {
+        return Err(ImportErrorKind::EmptyFile);
+    }
+    let (json_bytes, _) = split_container(bytes, kind)?;
+    let document = parse_document(json_bytes)?;
+    let names = document.materials().map(|m| m.name().map(str::to_owned)).collect();
+    let counts = mesh_instance_counts(&document)?;
+    let plan = plan(&document, &counts, &ImportLimits::default())?;
+    let instanced = counts.iter().zip(&plan.primitives).any(|(&n, p)| n >= 2 && !p.is_empty());
+    Ok((names, instanced))
 }
 
 /// The external buffer files the import of this glTF reads (see `import::referenced_files`).
@@ -245,7 +336,7 @@ fn mesh_instance_counts(document: &Document) -> KindResult<Vec<u64>> {
 /// transforms, in depth-first order. Call after `plan` has checked the counts.
 fn scene_instances(document: &Document, plan: &Plan) -> KindResult<Vec<Instance>> {
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
-        let all = document.meshes().map(|mesh| Instance { mesh: mesh.index(), transform: IDENTITY });
+        let all = document.meshes().map(|mesh| Instance { mesh: mesh.index(), transform: IDENTITY, node: None });
         return Ok(all.collect());
     };
     let mut instances = Vec::new();
@@ -254,7 +345,7 @@ fn scene_instances(document: &Document, plan: &Plan) -> KindResult<Vec<Instance>
     while let Some((node, parent)) = stack.pop() {
         let world = multiply(&parent, &node.transform().matrix());
         if let Some(mesh) = node.mesh().filter(|m| !plan.primitives[m.index()].is_empty()) {
-            instances.push(Instance { mesh: mesh.index(), transform: world });
+            instances.push(Instance { mesh: mesh.index(), transform: world, node: Some(node.index()) });
         }
         let children: Vec<_> = node.children().collect();
         stack.extend(children.into_iter().rev().map(|child| (child, world)));
@@ -314,6 +405,8 @@ fn plan(document: &Document, instance_count: &[u64], limits: &ImportLimits) -> K
         primitives: vec![Vec::new(); mesh_count],
         has_normals: true,
         has_uvs: true,
+        mesh_attributes: vec![(true, true); mesh_count],
+        mesh_sizes: vec![(0, 0); mesh_count],
         used_buffers: vec![false; document.buffers().len()],
         vertices: 0,
         triangles: 0,
@@ -327,7 +420,14 @@ fn plan(document: &Document, instance_count: &[u64], limits: &ImportLimits) -> K
                 skipped_modes.push(format!("{mode:?}"));
                 continue;
             }
+            let (normals_before, uvs_before) = (plan.has_normals, plan.has_uvs);
+            (plan.has_normals, plan.has_uvs) = (true, true);
             let sizes = check_primitive(&primitive, &mut plan)?;
+            let attributes = &mut plan.mesh_attributes[mesh.index()];
+            *attributes = (attributes.0 && plan.has_normals, attributes.1 && plan.has_uvs);
+            (plan.has_normals, plan.has_uvs) = (normals_before && plan.has_normals, uvs_before && plan.has_uvs);
+            let one = &mut plan.mesh_sizes[mesh.index()];
+            *one = (one.0.saturating_add(sizes.0), one.1.saturating_add(sizes.1));
             plan.primitives[mesh.index()].push(primitive.index());
             plan.vertices = plan.vertices.saturating_add(sizes.0.saturating_mul(copies));
             plan.triangles = plan.triangles.saturating_add(sizes.1.saturating_mul(copies));
@@ -612,6 +712,24 @@ fn read_mesh(document: &Document, instances: &[Instance], plan: &Plan, buffers: 
             let at = format!("mesh {} primitive {p}", instance.mesh);
             read_primitive(primitive, &at, &transform, buffers, material, &mut builder)?;
         }
+    }
+    builder.finish()
+}
+
+/// Reads the planned primitives of mesh `mesh` untransformed (its local space), with the
+/// normals and UVs that all of them have.
+fn read_local(document: &Document, mesh: usize, plan: &Plan, buffers: &Buffers) -> KindResult<SourceMesh> {
+    let unassigned_material = document.materials().len() as u32;
+    let (normals, uvs) = plan.mesh_attributes[mesh];
+    let (vertices, triangles) = plan.mesh_sizes[mesh];
+    let mut builder = MeshBuilder::new(normals, uvs, vertices as usize, triangles as usize);
+    let identity = Transform::new(&IDENTITY);
+    let primitives: Vec<_> = document.meshes().nth(mesh).map(|m| m.primitives().collect()).unwrap_or_default();
+    for &p in &plan.primitives[mesh] {
+        let primitive = &primitives[p];
+        let material = primitive.material().index().map_or(unassigned_material, |m| m as u32);
+        let at = format!("mesh {mesh} primitive {p}");
+        read_primitive(primitive, &at, &identity, buffers, material, &mut builder)?;
     }
     builder.finish()
 }

@@ -31,7 +31,9 @@
 //!
 //! # glTF 2.0 and GLB
 //! - The default scene is imported (else scene 0; with no scenes, every mesh once,
-//!   untransformed), every mesh node under its world transform, instancing flattened.
+//!   untransformed), every mesh node under its world transform, instancing flattened by
+//!   [`import_file`]; [`import_scene`] keeps meshes placed by two or more nodes apart, placed
+//!   by instances (policy on [`scene`]).
 //!   Normals use the inverse-transpose; a mirroring transform flips the winding back. Skins
 //!   and morph targets are ignored (bind pose).
 //! - Modes TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN, indexed or not; primitives of other
@@ -67,8 +69,10 @@ pub mod obj_stream;
 mod obj_syntax;
 pub mod obj_write;
 mod ply;
+pub mod scene;
 
 pub use mesh::SourceMesh;
+pub use scene::{ImportedScene, SceneFile};
 
 use std::fs::File;
 use std::io::Read;
@@ -251,6 +255,68 @@ fn import_bytes(path: &Path, kind: InputKind, bytes: Vec<u8>, limits: &ImportLim
         InputKind::Obj => obj::import(bytes, limits),
         InputKind::Gltf | InputKind::Glb => gltf::import(path, &bytes, kind, limits),
         InputKind::Ply => ply::import(&bytes, limits),
+    }
+}
+
+/// Imports one mesh file as a scene (policy on [`scene`]): glTF / GLB meshes placed by two
+/// or more nodes become their own meshes, placed by instances; everything else is flattened
+/// as [`import_file`] does. OBJ and PLY give [`import_file`]'s mesh and one identity instance.
+/// Material names come with it ([`material_names`]).
+pub fn import_scene(path: &Path, limits: &ImportLimits) -> Result<ImportedScene, ImportError> {
+    let fail = |kind| ImportError { path: path.to_path_buf(), kind };
+    let kind = InputKind::from_path(path).ok_or_else(|| fail(ImportErrorKind::UnsupportedExtension))?;
+    if matches!(kind, InputKind::Gltf | InputKind::Glb) {
+        let bytes = read_file(path, limits.max_file_bytes).map_err(|e| fail(ImportErrorKind::Io(e)))?.map_err(fail)?;
+        if bytes.is_empty() {
+            return Err(fail(ImportErrorKind::EmptyFile));
+        }
+        return gltf::import_scene(path, &bytes, kind, limits).map_err(fail);
+    }
+    let mesh = import_file(path, limits)?;
+    let material_names = material_names(path)?;
+    let stem = path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let instance = scene::SceneInstance { name: stem, node: None, mesh: 0, transform: scene::IDENTITY };
+    let meshes = vec![scene::SceneMesh { mesh, gltf_mesh: None }];
+    Ok(ImportedScene { meshes, instances: vec![instance], material_names })
+}
+
+/// Material index -> name for the mesh file at `path`, matching [`SourceMesh::materials`]:
+/// OBJ `usemtl` names in order of first use (read line by line; only `usemtl` lines are
+/// checked), glTF material names (`None` where unnamed), nothing for PLY. An index past the
+/// end has no material (OBJ faces before any `usemtl`, glTF primitives without one).
+pub fn material_names(path: &Path) -> Result<Vec<Option<String>>, ImportError> {
+    scene_outline(path).map(|outline| outline.material_names)
+}
+
+/// What a scene import of a file would give, found without reading its triangles (so that a
+/// batch can look up a cached bake cheaply): [`material_names`], and whether
+/// [`import_scene`] would place some mesh more than once.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneOutline {
+    /// Material index -> name, as [`material_names`].
+    pub material_names: Vec<Option<String>>,
+    /// Whether some glTF mesh is placed by two or more nodes.
+    pub instanced: bool,
+}
+
+/// The [`SceneOutline`] of the mesh file at `path`; errors like [`import_file`] for what it
+/// reads.
+pub fn scene_outline(path: &Path) -> Result<SceneOutline, ImportError> {
+    let fail = |kind| ImportError { path: path.to_path_buf(), kind };
+    let names = |names: Vec<String>| names.into_iter().map(Some).collect();
+    match InputKind::from_path(path).ok_or_else(|| fail(ImportErrorKind::UnsupportedExtension))? {
+        InputKind::Obj => Ok(SceneOutline {
+            material_names: names(obj_stream::material_names(path).map_err(fail)?),
+            instanced: false,
+        }),
+        InputKind::Ply => Ok(SceneOutline { material_names: Vec::new(), instanced: false }),
+        kind @ (InputKind::Gltf | InputKind::Glb) => {
+            let limits = ImportLimits::default();
+            let bytes =
+                read_file(path, limits.max_file_bytes).map_err(|e| fail(ImportErrorKind::Io(e)))?.map_err(fail)?;
+            let (material_names, instanced) = gltf::outline(&bytes, kind).map_err(fail)?;
+            Ok(SceneOutline { material_names, instanced })
+        }
     }
 }
 

@@ -157,6 +157,20 @@ impl ObjVertices {
 /// The UTF-8 byte-order mark.
 const BOM: &[u8] = "\u{feff}".as_bytes();
 
+/// The `usemtl` names of the OBJ file at `path` in order of first use (a name's position is
+/// its material index, as both OBJ readers number them), read line by line so that a large
+/// file never has to fit in memory. Only `usemtl` lines are checked.
+pub(crate) fn material_names(path: &Path) -> KindResult<Vec<String>> {
+    let mut names = Vec::new();
+    for_each_line(path, |line_no, line| {
+        if line.split_whitespace().next() == Some("usemtl") {
+            record_material(&mut names, line, line_no)?;
+        }
+        Ok(())
+    })?;
+    Ok(names)
+}
+
 /// Calls `f` with each line (1-based number, text without the line end) of the file.
 fn for_each_line(path: &Path, mut f: impl FnMut(usize, &str) -> KindResult<()>) -> KindResult<()> {
     let file = File::open(path).map_err(ImportErrorKind::Io)?;

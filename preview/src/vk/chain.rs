@@ -62,7 +62,15 @@ impl ChainRenderer {
     pub fn new(device: &Arc<Device>, chain: &LodChain, instances: &[[f32; 3]]) -> Result<ChainRenderer> {
         use vk::BufferUsageFlags as U;
         let instance_count = instances.len().max(1) as u32;
-        let inst: Vec<[f32; 4]> = instances.iter().map(|t| [t[0], t[1], t[2], 0.0]).collect();
+        // The shared instance layout; the chain's shaders read the translation only.
+        let inst: Vec<crate::gpu_types::GpuInstance> = instances
+            .iter()
+            .map(|t| {
+                let mut i = crate::gpu_types::GpuInstance::default();
+                i.model[3] = [t[0], t[1], t[2], 1.0];
+                i
+            })
+            .collect();
         let levels: Vec<[f32; 4]> = chain.levels.iter().map(|l| [l.error, 0.0, 0.0, 0.0]).collect();
         let mut uploads = Vec::new();
         let positions = gpu_buffer(device, cast_slice(&chain.positions), U::STORAGE_BUFFER, &mut uploads)?;

@@ -15,7 +15,7 @@ use super::pipelines::{compute_pipeline, draw_pipeline, Commands, Descriptors};
 use super::resources::{subresource_range, Buffer, Image, Location, Pipeline};
 use super::swapchain::{AcquiredImage, Swapchain};
 use crate::gpu_types::{
-    GpuCounters, GpuView, DISPATCH_ARGS_OFFSET, DRAW_ARGS_OFFSET, MESH_ARGS_OFFSET, SELECT_ARGS_OFFSET,
+    GpuCounters, GpuInstance, GpuView, DISPATCH_ARGS_OFFSET, DRAW_ARGS_OFFSET, MESH_ARGS_OFFSET, SELECT_ARGS_OFFSET,
 };
 use crate::scene::SceneData;
 
@@ -42,6 +42,8 @@ const TIMESTAMPS: u32 = 4;
 pub struct Selection {
     /// Visible clusters, in the order the GPU appended them.
     pub visible: Vec<u32>,
+    /// The instance of each visible cluster.
+    pub instances: Vec<u32>,
     /// (own, parent) projected errors of every cluster, when asked for.
     pub projected: Vec<[f32; 2]>,
 }
@@ -113,8 +115,9 @@ pub struct RendererOptions {
     pub naive_arithmetic: bool,
     /// Draw path; `Mesh` fails where the device was created without mesh shaders.
     pub path: DrawPath,
-    /// Instance translations (object space); empty means one instance at the origin.
-    pub instances: Vec<[f32; 3]>,
+    /// The instances (`crate::instances`); empty means one identity instance of the scene's
+    /// first mesh.
+    pub instances: Vec<GpuInstance>,
     /// Visible-list entries (default: every cluster of every instance, at most [`MAX_VISIBLE`]).
     pub visible_capacity: Option<u32>,
     /// Fallback index-buffer entries (default: every cluster's indices, at most 2^26 with
@@ -195,11 +198,14 @@ impl Renderer {
             DrawPath::Mesh => true,
             DrawPath::Fallback => false,
         };
-        let instances: Vec<[f32; 4]> = if options.instances.is_empty() {
-            vec![[0.0; 4]]
+        let instances: Vec<GpuInstance> = if options.instances.is_empty() {
+            vec![crate::instances::translated(scene, 0, [0.0; 3])]
         } else {
-            options.instances.iter().map(|t| [t[0], t[1], t[2], 0.0]).collect()
+            options.instances.clone()
         };
+        if let Some(bad) = instances.iter().find(|i| i.mesh as usize >= scene.parts.len()) {
+            bail!("an instance places mesh {}, the scene has {}", bad.mesh, scene.parts.len());
+        }
         let instance_count = u32::try_from(instances.len()).context("too many instances")?;
         let cluster_count = scene.clusters.len() as u32;
         let n = cluster_count.max(1) as u64;
@@ -424,17 +430,16 @@ impl Renderer {
                 counters.visible_count
             );
         }
-        let visible: Vec<u32> =
-            cast_slice::<u8, [u32; 2]>(&self.readback_visible.read(counters.visible_count as usize * 8)?)
-                .iter()
-                .map(|e| e[0])
-                .collect();
+        let entries = self.readback_visible.read(counters.visible_count as usize * 8)?;
+        let entries = cast_slice::<u8, [u32; 2]>(&entries);
+        let visible: Vec<u32> = entries.iter().map(|e| e[0]).collect();
+        let instances: Vec<u32> = entries.iter().map(|e| e[1]).collect();
         let projected = if want_projected {
             cast_slice::<u8, [f32; 2]>(&self.readback_projected.read(self.cluster_count as usize * 8)?).to_vec()
         } else {
             Vec::new()
         };
-        Ok(Selection { visible, projected })
+        Ok(Selection { visible, instances, projected })
     }
 
     /// Selects, expands and draws the clusters for `view` into a `width` × `height` image and

@@ -29,8 +29,11 @@ use std::time::Instant;
         the embedded defaults. The directory of that file is the asset root when the input lies inside it \
         (else the input directory): outputs mirror the tree below the asset root and [[override]] globs match \
         paths below it, so baking a subfolder or one file writes what baking the whole tree writes.\n\n\
-        After a directory's batch, .mres files in the output directory that no current asset produces \
-        (renamed or deleted assets) are listed; --prune deletes them.\n\n\
+        In a glTF scene where a mesh is placed by two or more nodes, each mesh is baked once into \
+        NAME.meshN.mres (else the scene is flattened into NAME.mres); NAME.scene.json lists the .mres files, material names and instances (written \
+        whenever an asset has instances or material names; docs/FORMAT.md, \"Scene file\").\n\n\
+        After a directory's batch, .mres and scene files in the output directory that no current asset \
+        produces (renamed or deleted assets) are listed; --prune deletes them.\n\n\
         Exit codes: 0 every asset baked; 1 some assets failed (the others are still written) or no assets \
         were found; 2 usage, settings or I/O error (nothing baked)."
 )]
@@ -54,12 +57,12 @@ struct Cli {
     #[arg(short, long, value_name = "N")]
     jobs: Option<usize>,
     /// Write a JSON report to FILE: per asset (status, input and level-0 triangles, degenerate
-    /// triangles dropped, levels, clusters, bytes, seconds, cache hit), the settings file used,
+    /// triangles dropped, levels, clusters, bytes, seconds, cache hit, scene and mesh files), the settings file used,
     /// skipped files with the reason, stale and pruned outputs, unmatched override globs.
     #[arg(long, value_name = "FILE")]
     report: Option<PathBuf>,
-    /// Delete the stale .mres files of the output directory: those that no asset under the
-    /// input produces. Only .mres files, only under the output directory (the part of it that
+    /// Delete the stale .mres and scene files of the output directory: those that no asset under
+    /// the input produces. Only .mres and .scene.json files, only under the output directory (the part of it that
     /// mirrors the input), which is taken to hold this tree's outputs alone: bake a subfolder
     /// into the tree's output directory only where a pipeline.toml marks the tree's root.
     #[arg(long)]
@@ -239,7 +242,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
     for glob in &unmatched {
         eprintln!("warning: {glob}");
     }
-    let (stale, pruned) = if setup.directory { stale(&cli, &setup, &batch)? } else { (Vec::new(), Vec::new()) };
+    let (stale, pruned) =
+        if setup.directory { stale(&cli, &setup, &batch, &reports)? } else { (Vec::new(), Vec::new()) };
     if let Some(mut file) = setup.report.take() {
         let json = report_json(&setup, &reports, seconds, &unmatched, &stale, &pruned);
         let text = serde_json::to_string_pretty(&json)?;
@@ -446,8 +450,8 @@ fn print_summary(cli: &Cli, found: &Found, reports: &[AssetReport], seconds: f64
 
 /// Finds the stale outputs of a directory's batch; warns about them, or deletes them with
 /// `--prune`. Returns (stale, pruned).
-fn stale(cli: &Cli, setup: &Setup, batch: &Batch) -> Result<(Vec<PathBuf>, Vec<PathBuf>)> {
-    let expected: HashSet<PathBuf> = setup.found.assets.iter().map(|a| batch.output_for(a)).collect();
+fn stale(cli: &Cli, setup: &Setup, batch: &Batch, reports: &[AssetReport]) -> Result<(Vec<PathBuf>, Vec<PathBuf>)> {
+    let expected: HashSet<PathBuf> = batch.expected_outputs(reports);
     let dir = setup.out_dir.join(&setup.prefix);
     let stale = stale_outputs(&dir, &expected)?;
     if stale.is_empty() {
@@ -457,7 +461,7 @@ fn stale(cli: &Cli, setup: &Setup, batch: &Batch) -> Result<(Vec<PathBuf>, Vec<P
         let listed: Vec<String> = stale.iter().take(STALE_LISTED).map(|p| p.display().to_string()).collect();
         let more = stale.len().saturating_sub(STALE_LISTED);
         eprintln!(
-            "warning: {} stale .mres files in {} that no asset produces (renamed or deleted assets?): {}{}; \
+            "warning: {} stale .mres/scene files in {} that no asset produces (renamed or deleted assets?): {}{}; \
              `bake-all --prune` deletes them",
             stale.len(),
             dir.display(),
@@ -474,7 +478,7 @@ fn stale(cli: &Cli, setup: &Setup, batch: &Batch) -> Result<(Vec<PathBuf>, Vec<P
         }
         pruned.push(path.clone());
     }
-    eprintln!("pruned {} stale .mres files from {}", pruned.len(), dir.display());
+    eprintln!("pruned {} stale .mres/scene files from {}", pruned.len(), dir.display());
     Ok((stale, pruned))
 }
 
@@ -499,6 +503,7 @@ fn report_json(
         "level0_triangles": sum(|r| r.level0_triangles),
         "degenerate_dropped": sum(|r| r.degenerate_dropped),
         "bytes": sum(|r| r.bytes),
+        "scene_bytes": sum(|r| r.scene_bytes),
         "seconds": seconds,
         "unmatched_overrides": unmatched,
         "stale": stale,

@@ -44,7 +44,8 @@ enum Command {
     /// and verifies every page: a damaged file exits 2.
     Inspect(InspectArgs),
     /// Write a cut of the DAG as an OBJ mesh: the uniform cut at object-space error E, or the
-    /// view-dependent cut seen from a camera at a pixel threshold.
+    /// view-dependent cut seen from a camera at a pixel threshold. Materials are named by the
+    /// scene file beside the .mres (NAME.scene.json), if there is one.
     Export(ExportArgs),
     /// Bake INPUT with mres and with meshoptimizer's clusterlod (each in its own child process)
     /// and compare time, peak memory and quality: the triangles each needs at equal measured
@@ -288,8 +289,14 @@ impl<'a> Output<'a> {
 }
 
 fn write_obj(mesh: &SourceMesh, out: Output) -> Result<()> {
+    write_obj_named(mesh, &[], out)
+}
+
+/// Writes `mesh` as OBJ, `usemtl` lines naming the materials `names` names.
+fn write_obj_named(mesh: &SourceMesh, names: &[Option<String>], out: Output) -> Result<()> {
     let mut writer = std::io::BufWriter::new(out.tmp.as_file());
-    mres_import::obj_write::write_obj(mesh, &mut writer).with_context(|| format!("{}", out.path.display()))?;
+    mres_import::obj_write::write_obj_named(mesh, names, &mut writer)
+        .with_context(|| format!("{}", out.path.display()))?;
     writer.flush().with_context(|| format!("{}", out.path.display()))?;
     drop(writer);
     out.finish()
@@ -432,7 +439,8 @@ fn export_cmd(a: ExportArgs) -> Result<ExitCode> {
         _ => bail!("give --error E, or --camera x,y,z with --tau T"),
     };
     let mesh = mres_cli::export::cut_mesh(&f, &cut).with_context(|| format!("{}", a.file.display()))?;
-    write_obj(&mesh, out)?;
+    let names = mres_cli::export::material_names_for(&a.file)?;
+    write_obj_named(&mesh, &names, out)?;
     eprintln!("{}: {} clusters, {} triangles", a.output.display(), cut.len(), mesh.triangle_count());
     Ok(ExitCode::SUCCESS)
 }
