@@ -561,8 +561,10 @@ impl InputSide<'_> {
 /// settles all of their samples. Distance to a surface is 1-Lipschitz, so every point within
 /// `R` of the centre is within `d + R` of the output; a patch is settled when `d + R` is below
 /// `bound(e)` (the distance under which a sample of member error `e` cannot raise the current
-/// maximum). Its triangles' duties are cleared and their samples `found` at the triangle the
-/// centre's query stopped at, within the bound of each of them. Patches are runs of `input`
+/// maximum). Its triangles' duties are cleared and their measured samples `found` at the
+/// triangle the centre's query stopped at, within the bound of each of them (a corner the
+/// output kept stays unfound: the hand-down gives it to a cluster using it, which keeps the
+/// next level's errors tight). Patches are runs of `input`
 /// (in Morton order, see [`Owned`]), halved until they settle or hold one triangle; what is left is
 /// measured sample by sample. At upper levels, whose errors dwarf the level-0 triangles, this
 /// replaces most of the three queries per level-0 triangle by one per patch.
@@ -588,8 +590,12 @@ fn accept_patches(
             let (d2, nearest) = bvh.nearest_squared(output, center, enough, hint);
             hint = nearest;
             if d2 <= enough {
-                duty[run.clone()].fill(0);
-                found[7 * run.start..7 * run.end].fill(nearest as u32);
+                for i in run.clone() {
+                    for b in (0..7).filter(|b| duty[i] >> b & 1 != 0) {
+                        found[7 * i + b] = nearest as u32;
+                    }
+                    duty[i] = 0;
+                }
                 continue;
             }
         }
