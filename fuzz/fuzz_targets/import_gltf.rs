@@ -1,6 +1,7 @@
 //! glTF / GLB importer. The first input byte picks the extension (even: `.glb`, odd:
 //! `.gltf`); the rest is written to that file and imported with `import_file` (limits:
-//! 1 MiB, 2^20 triangles); `referenced_files` runs on it too. Each extension has its own
+//! 1 MiB, 2^20 triangles); `referenced_files` and the instancing import `import_scene` run on
+//! it too, and the bytes are also read as a scene file (`SceneFile::parse`). Each extension has its own
 //! directory, which also holds the external buffers that seeds refer to (`strip_fan.bin`,
 //! `buffer_length_beyond_file.bin`); a URI naming `input.gltf` reads the input itself.
 #![no_main]
@@ -12,7 +13,7 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use libfuzzer_sys::fuzz_target;
-use mres_import::{import_file, referenced_files, ImportLimits};
+use mres_import::{import_file, import_scene, referenced_files, ImportLimits, SceneFile};
 
 const LIMITS: ImportLimits = ImportLimits { max_file_bytes: 1 << 20, max_triangles: 1 << 20 };
 
@@ -33,5 +34,7 @@ fuzz_target!(|data: &[u8]| {
     };
     tempfile::write(path, contents);
     let _ = import_file(path, &LIMITS);
+    let _ = import_scene(path, &LIMITS);
     let _ = referenced_files(path);
+    let _ = SceneFile::parse(contents);
 });
