@@ -1,7 +1,8 @@
 //! The page encoding on disk (FORMAT.md §4.3): a page's clusters as prediction residuals in
 //! byte planes, which zstd then compresses, instead of the bit-packed GPU layout (§5) that
-//! zstd cannot shrink. Decoding gives back the quantized values exactly; the GPU layout is
-//! then rebuilt from them ([`crate::write`] lays it out, for the writer and the reader alike).
+//! zstd cannot shrink. Decoding gives back the quantized values exactly; the reader goes
+//! straight to the GPU layout ([`crate::decode`]), and the straightforward decoder here, to
+//! quantized values, is kept as the reference the tests hold it to.
 //!
 //! Indices are meshoptimizer's index codec (format version 1, `encode_index_buffer`), which
 //! codes each triangle against the edges and vertices of the triangles before it and keeps
