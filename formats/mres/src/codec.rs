@@ -76,7 +76,7 @@ pub(crate) fn first_use_order(indices: &[u8], vertex_count: usize) -> Vec<u8> {
 /// allocates nothing per cluster) and a lookup or insert is one load or store, where a hash
 /// table cost a quarter of the decoding time.
 pub(crate) struct EdgeTable {
-    /// Per unordered edge: `stamp << 8 | opposite`.
+    /// Per directed edge: `stamp << 8 | opposite`.
     entries: Box<[u32; 1 << 16]>,
     /// The stamp of the current cluster's entries (below 2^24).
     current: u32,
@@ -96,16 +96,20 @@ impl EdgeTable {
         }
     }
 
-    fn key(a: u8, b: u8) -> u16 {
-        (a.min(b) as u16) << 8 | a.max(b) as u16
+    /// Entry of the directed edge (a, b). An edge is stored under both directions, so that a
+    /// lookup needs no ordering of its ends (which cost more than the second store).
+    fn key(a: u8, b: u8) -> usize {
+        (a as usize) << 8 | b as usize
     }
 
     fn insert(&mut self, a: u8, b: u8, opposite: u8) {
-        self.entries[Self::key(a, b) as usize] = self.current << 8 | opposite as u32;
+        let e = self.current << 8 | opposite as u32;
+        self.entries[Self::key(a, b)] = e;
+        self.entries[Self::key(b, a)] = e;
     }
 
     fn get(&self, a: u8, b: u8) -> Option<u8> {
-        let e = self.entries[Self::key(a, b) as usize];
+        let e = self.entries[Self::key(a, b)];
         (e >> 8 == self.current).then_some(e as u8)
     }
 }
