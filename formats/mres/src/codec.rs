@@ -1,7 +1,8 @@
 //! The page encoding on disk (FORMAT.md §4.3): a page's clusters as prediction residuals in
 //! byte planes, which zstd then compresses, instead of the bit-packed GPU layout (§5) that
-//! zstd cannot shrink. Decoding gives back the quantized values exactly; the GPU layout is
-//! then rebuilt from them ([`crate::write`] lays it out, for the writer and the reader alike).
+//! zstd cannot shrink. Decoding gives back the quantized values exactly; the reader goes
+//! straight to the GPU layout ([`crate::decode`]), and the straightforward decoder here, to
+//! quantized values, is kept as the reference the tests hold it to.
 //!
 //! Indices are meshoptimizer's index codec (format version 1, `encode_index_buffer`), which
 //! codes each triangle against the edges and vertices of the triangles before it and keeps
@@ -37,7 +38,7 @@ pub(crate) struct Quantized {
 
 /// How a vertex is predicted from the vertices decoded before it (FORMAT.md §4.3).
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Predictor {
+pub(crate) enum Predictor {
     /// `a + b − d`: across the edge (a, b) from the last earlier triangle that used it.
     Parallelogram(u8, u8, u8),
     /// A vertex decoded before: one of the same triangle, or the previous one.
@@ -50,7 +51,7 @@ enum Predictor {
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Invalid(pub String);
 
-fn invalid<T>(what: impl Into<String>) -> Result<T, Invalid> {
+pub(crate) fn invalid<T>(what: impl Into<String>) -> Result<T, Invalid> {
     Err(Invalid(what.into()))
 }
 
@@ -70,54 +71,68 @@ pub(crate) fn first_use_order(indices: &[u8], vertex_count: usize) -> Vec<u8> {
 }
 
 /// Edges of the triangles seen so far → the vertex opposite the edge in the last triangle
-/// that used it: a direct table over every pair of 8-bit indices, with a stamp per entry so
-/// that clearing it per cluster is one increment (decoding then allocates nothing per cluster
-/// and a lookup is one load, where a hash table cost a quarter of the decoding time).
-struct EdgeTable {
-    stamp: Vec<u16>,
-    opposite: Vec<u8>,
-    current: u16,
+/// that used it: a direct table over every pair of 8-bit indices, each entry a stamp and the
+/// opposite vertex in one word, so that clearing it per cluster is one increment (decoding then
+/// allocates nothing per cluster) and a lookup or insert is one load or store, where a hash
+/// table cost a quarter of the decoding time.
+pub(crate) struct EdgeTable {
+    /// Per directed edge: `stamp << 8 | opposite`.
+    entries: Box<[u32; 1 << 16]>,
+    /// The stamp of the current cluster's entries (below 2^24).
+    current: u32,
 }
 
 impl EdgeTable {
-    fn new() -> EdgeTable {
-        EdgeTable { stamp: vec![0; 1 << 16], opposite: vec![0; 1 << 16], current: 1 }
+    pub(crate) fn new() -> EdgeTable {
+        EdgeTable { entries: Box::new([0; 1 << 16]), current: 1 }
     }
 
     /// Forgets every edge.
     fn clear(&mut self) {
-        self.current = self.current.wrapping_add(1);
-        if self.current == 0 {
-            self.stamp.fill(0);
+        self.current += 1;
+        if self.current == 1 << 24 {
+            self.entries.fill(0);
             self.current = 1;
         }
     }
 
+    /// Entry of the directed edge (a, b). An edge is stored under both directions, so that a
+    /// lookup needs no ordering of its ends (which cost more than the second store).
     fn key(a: u8, b: u8) -> usize {
-        (a.min(b) as usize) << 8 | a.max(b) as usize
+        (a as usize) << 8 | b as usize
     }
 
     fn insert(&mut self, a: u8, b: u8, opposite: u8) {
-        let k = Self::key(a, b);
-        self.stamp[k] = self.current;
-        self.opposite[k] = opposite;
+        let e = self.current << 8 | opposite as u32;
+        self.entries[Self::key(a, b)] = e;
+        self.entries[Self::key(b, a)] = e;
     }
 
     fn get(&self, a: u8, b: u8) -> Option<u8> {
-        let k = Self::key(a, b);
-        (self.stamp[k] == self.current).then(|| self.opposite[k])
+        let e = self.entries[Self::key(a, b)];
+        (e >> 8 == self.current).then_some(e as u8)
     }
 }
 
-/// Each vertex of a cluster with its predictor, in decoding order: the order in which the
-/// triangles first use them, then the vertices no triangle uses in index order (FORMAT.md
-/// §4.3). Computed from the indices alone: the decoder knows them before any attribute.
+/// Each vertex of a cluster with its predictor, in decoding order (see [`walk`]).
 fn predictors(indices: &[u8], vertex_count: usize, edges: &mut EdgeTable) -> Vec<(u8, Predictor)> {
+    let mut out = Vec::with_capacity(vertex_count);
+    walk(indices, vertex_count, edges, |v, p| out.push((v, p)));
+    out
+}
+
+/// Calls `visit` with each vertex of a cluster and its predictor, in decoding order: the order
+/// in which the triangles first use them, then the vertices no triangle uses in index order
+/// (FORMAT.md §4.3). Computed from the indices alone: the decoder knows them before any
+/// attribute. The encoder and the decoder both walk here, so they cannot disagree. Every
+/// index must be below `vertex_count` (at most 256).
+pub(crate) fn walk(indices: &[u8], vertex_count: usize, edges: &mut EdgeTable, mut visit: impl FnMut(u8, Predictor)) {
     edges.clear();
     let mut seen = [false; MAX_CLUSTER_VERTICES];
-    let mut out: Vec<(u8, Predictor)> = Vec::with_capacity(vertex_count);
-    let previous = |out: &[(u8, Predictor)]| out.last().map_or(Predictor::Anchor, |&(p, _)| Predictor::Neighbour(p));
+    let mut last: Option<u8> = None;
+    let previous = |last: Option<u8>| last.map_or(Predictor::Anchor, Predictor::Neighbour);
     for t in indices.chunks_exact(3) {
+        let t = [t[0], t[1], t[2]];
         for k in 0..3 {
             let v = t[k];
             if seen[v as usize] {
@@ -128,25 +143,25 @@ fn predictors(indices: &[u8], vertex_count: usize, edges: &mut EdgeTable) -> Vec
                 (true, true) => edges.get(a, b).map_or(Predictor::Neighbour(a), |d| Predictor::Parallelogram(a, b, d)),
                 (true, false) => Predictor::Neighbour(a),
                 (false, true) => Predictor::Neighbour(b),
-                (false, false) => previous(&out),
+                (false, false) => previous(last),
             };
             seen[v as usize] = true;
-            out.push((v, pred));
+            visit(v, pred);
+            last = Some(v);
         }
         for k in 0..3 {
             edges.insert(t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
         }
     }
     for (v, _) in seen.iter().enumerate().take(vertex_count).filter(|(_, &s)| !s) {
-        let pred = previous(&out);
-        out.push((v as u8, pred));
+        visit(v as u8, previous(last));
+        last = Some(v as u8);
     }
-    out
 }
 
 /// Integer vectors the predictors work on: wrapping arithmetic, so that every residual of every
 /// value is defined and decoding never overflows.
-trait Lanes: Copy + Default {
+pub(crate) trait Lanes: Copy + Default {
     fn add(self, o: Self) -> Self;
     fn sub(self, o: Self) -> Self;
 }
@@ -171,7 +186,7 @@ impl Lanes for [u16; 2] {
 
 /// The predicted value from the values decoded so far; `anchor` is the previous cluster's
 /// first vertex (zero for the page's first cluster).
-fn predict<T: Lanes>(p: Predictor, values: &[T], anchor: T) -> T {
+pub(crate) fn predict<T: Lanes>(p: Predictor, values: &[T], anchor: T) -> T {
     let at = |i: u8| values.get(i as usize).copied().unwrap_or_default();
     match p {
         Predictor::Parallelogram(a, b, d) => at(a).add(at(b)).sub(at(d)),
@@ -184,7 +199,7 @@ fn zigzag32(r: i32) -> u32 {
     ((r << 1) ^ (r >> 31)) as u32
 }
 
-fn unzigzag32(z: u32) -> i32 {
+pub(crate) fn unzigzag32(z: u32) -> i32 {
     ((z >> 1) as i32) ^ -((z & 1) as i32)
 }
 
@@ -193,12 +208,12 @@ fn zigzag16(r: u16) -> u16 {
     ((r << 1) ^ (r >> 15)) as u16
 }
 
-fn unzigzag16(z: u16) -> u16 {
+pub(crate) fn unzigzag16(z: u16) -> u16 {
     ((z >> 1) as i16 ^ -((z & 1) as i16)) as u16
 }
 
 /// Size of the page preamble: the position plane count, then three zero bytes.
-const PREAMBLE: usize = 4;
+pub(crate) const PREAMBLE: usize = 4;
 
 /// The most bytes meshoptimizer's index codec writes for `triangles` triangles of a cluster
 /// (`meshopt_encodeIndexBufferBound` for at most 256 vertices: a header byte, at most 8 bytes
@@ -327,10 +342,12 @@ fn residuals<T: Lanes>(preds: &[(u8, Predictor)], values: &[T], anchor: T, mut o
 }
 
 /// A reader over the encoded page's sections, each a byte slice taken in turn.
+#[cfg(test)]
 struct Sections<'a> {
     rest: &'a [u8],
 }
 
+#[cfg(test)]
 impl<'a> Sections<'a> {
     fn take(&mut self, len: usize) -> Result<&'a [u8], Invalid> {
         if len > self.rest.len() {
@@ -356,9 +373,11 @@ impl<'a> Sections<'a> {
     }
 }
 
-/// Decodes a page's encoded bytes (FORMAT.md §4.3) into its clusters' quantized values;
+/// The reference decoder, which the tests hold the fast one ([`crate::decode`]) to: decodes
+/// a page's encoded bytes (FORMAT.md §4.3) into its clusters' quantized values;
 /// `records` are the page's cluster records. Every index, octahedral value and mark is
 /// checked against its range; the lengths must match the counts exactly.
+#[cfg(test)]
 pub(crate) fn decode_page(
     bytes: &[u8],
     records: &[ClusterInfo],
@@ -425,6 +444,7 @@ pub(crate) fn decode_page(
 }
 
 /// Values from residuals, in decoding order: each vertex is its prediction plus its residual.
+#[cfg(test)]
 fn rebuild<T: Lanes, Z: Copy>(preds: &[(u8, Predictor)], residuals: &[Z], anchor: T, un: impl Fn(Z) -> T) -> Vec<T> {
     let mut values: Vec<T> = vec![T::default(); preds.len()];
     for (&(v, p), &z) in preds.iter().zip(residuals) {
@@ -435,6 +455,7 @@ fn rebuild<T: Lanes, Z: Copy>(preds: &[(u8, Predictor)], residuals: &[Z], anchor
 
 /// A cluster's local indices from meshoptimizer's index codec, each checked to name a vertex
 /// of the cluster.
+#[cfg(test)]
 fn decode_indices(coded: &[u8], vertex_count: usize, triangle_count: usize) -> Result<Vec<u8>, Invalid> {
     if coded.len() > index_bound(triangle_count) {
         return invalid(format!("{} bytes of coded indices for {triangle_count} triangles", coded.len()));
@@ -501,6 +522,47 @@ mod tests {
         // One byte more or less is refused.
         assert!(decode_page(&bytes[..bytes.len() - 1], &records(&bare), 0, 0).is_err());
         assert!(decode_page(&[&bytes[..], &[0]].concat(), &records(&bare), 0, 0).is_err());
+    }
+
+    /// The fast decoder against this reference one and the writer's layout: the same GPU
+    /// bytes for a well-formed page, and for every corruption either both refuse it or both
+    /// give the same bytes. `raw_size` is the intact page's: what the page table would say.
+    fn agree(bytes: &[u8], records: &[ClusterInfo], flags: u32, normal_bits: u32, raw_size: usize) -> bool {
+        let reference = decode_page(bytes, records, flags, normal_bits).map(|q| crate::write::gpu_page(&q, flags));
+        let len = reference.as_ref().map_or(raw_size, Vec::len);
+        let fast = crate::decode::decode_page_gpu(bytes, records, flags, normal_bits, len);
+        reference.is_ok() == fast.is_ok() && reference.ok() == fast.ok()
+    }
+
+    #[test]
+    fn the_fast_decoder_agrees_with_the_reference() {
+        let clusters = [sample(3, 5), sample(256, -7), sample(40, 1 << 30)];
+        for flags in [0, FLAG_NORMALS, FLAG_UVS | FLAG_MATERIALS, FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS] {
+            let clusters: Vec<Quantized> = clusters
+                .iter()
+                .map(|c| Quantized {
+                    normals: if flags & FLAG_NORMALS != 0 { c.normals.clone() } else { vec![] },
+                    uvs: if flags & FLAG_UVS != 0 { c.uvs.clone() } else { vec![] },
+                    materials: if flags & FLAG_MATERIALS != 0 { c.materials.clone() } else { vec![] },
+                    ..c.clone()
+                })
+                .collect();
+            let records = records(&clusters);
+            let bytes: Vec<u8> = encode_page(&clusters, flags).unwrap().concat();
+            let gpu = crate::write::gpu_page(&clusters, flags);
+            assert_eq!(crate::decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len()), Ok(gpu.clone()));
+            // Any other raw size is refused.
+            assert!(crate::decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len() + 4).is_err());
+            for i in 0..bytes.len() {
+                let mut bad = bytes.clone();
+                bad[i] ^= 1 << (i % 8);
+                assert!(agree(&bad, &records, flags, 10, gpu.len()), "flags {flags}: byte {i} flipped");
+            }
+            for cut in (0..bytes.len()).step_by(7) {
+                assert!(agree(&bytes[..cut], &records, flags, 10, gpu.len()), "flags {flags}: cut at {cut}");
+            }
+            assert!(agree(&bytes, &records, flags, 9, gpu.len()));
+        }
     }
 
     #[test]

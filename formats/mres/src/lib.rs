@@ -61,6 +61,7 @@
 
 pub mod bits;
 mod codec;
+mod decode;
 pub mod error;
 pub mod page;
 pub mod read;

@@ -3,10 +3,11 @@
 
 use super::bits::{oct_decode, read_bits};
 use super::codec;
+use super::decode;
 use super::error::{corrupt, section, MresError};
 use super::records::ClusterHeader;
-use super::write::gpu_page;
 use super::*;
+use std::cell::RefCell;
 
 /// One page, checked and decompressed: its bytes in the GPU layout (FORMAT.md §5), uploaded as
 /// is, and the same clusters decoded.
@@ -72,18 +73,25 @@ pub(crate) fn decompress_page(
             "page {p}: its clusters could encode to {most} bytes (limit {MAX_PAGE_ENCODED_SIZE})"
         )));
     }
-    let encoded = zstd::bulk::decompress(compressed, most)
-        .map_err(|e| MresError::Decompress { page: p, problem: e.to_string() })?;
-    let quantized = codec::decode_page(&encoded, records, header.flags, header.normal_bits)
-        .map_err(|e| MresError::Decompress { page: p, problem: e.0 })?;
-    let raw = gpu_page(&quantized, header.flags);
-    if raw.len() != info.raw_size as usize {
-        return Err(MresError::Decompress {
-            page: p,
-            problem: format!("decodes to {} bytes, table says {}", raw.len(), info.raw_size),
-        });
-    }
-    Ok(raw)
+    let problem = |problem: String| MresError::Decompress { page: p, problem };
+    ZSTD.with(|cell| {
+        let mut cell = cell.borrow_mut();
+        if cell.is_none() {
+            *cell = Some((zstd::bulk::Decompressor::new().map_err(|e| problem(e.to_string()))?, Vec::new()));
+        }
+        let Some((zstd, encoded)) = cell.as_mut() else { return Err(problem("no zstd context".into())) };
+        encoded.clear();
+        encoded.reserve(most);
+        zstd.decompress_to_buffer(compressed, encoded).map_err(|e| problem(e.to_string()))?;
+        decode::decode_page_gpu(encoded, records, header.flags, header.normal_bits, info.raw_size as usize)
+            .map_err(|e| problem(e.0))
+    })
+}
+
+thread_local! {
+    /// A zstd context and a buffer for a page's encoded bytes, reused from page to page: a
+    /// fresh context per page costs more than decompressing a small page.
+    static ZSTD: RefCell<Option<(zstd::bulk::Decompressor<'static>, Vec<u8>)>> = const { RefCell::new(None) };
 }
 
 /// The records of page `p`'s clusters.

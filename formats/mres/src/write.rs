@@ -3,6 +3,7 @@
 
 use super::bits::{bits_for, oct_encode, read_bits, BitWriter};
 use super::codec::{self, first_use_order, Quantized};
+use super::decode;
 use super::records::{meta_checksum, ClusterHeader, ClusterRecord, GroupRecord, HeaderRecord, PageRecord};
 use super::*;
 use rayon::prelude::*;
@@ -317,8 +318,8 @@ fn compress_page(clusters: &[&EncodedCluster], header: &Header, level: i32) -> R
             page_offset: 0,
         })
         .collect();
-    let decoded = codec::decode_page(&encoded, &records, header.flags, header.normal_bits);
-    if decoded.map(|d| gpu_page(&d, header.flags)).ok() != Some(raw) {
+    let decoded = decode::decode_page_gpu(&encoded, &records, header.flags, header.normal_bits, raw.len());
+    if decoded.ok() != Some(raw) {
         return Err(codec_bug());
     }
     let mut out = Vec::new();
@@ -329,7 +330,8 @@ fn compress_page(clusters: &[&EncodedCluster], header: &Header, level: i32) -> R
 }
 
 /// The GPU layout (FORMAT.md §5) of a page of quantized clusters, laid out as the writer lays
-/// out every page: the page decoder rebuilds pages here.
+/// out every page: what the page decoder ([`crate::decode`]) must give back.
+#[cfg(test)]
 pub(crate) fn gpu_page(clusters: &[Quantized], flags: u32) -> Vec<u8> {
     let encoded: Vec<EncodedCluster> = clusters
         .iter()

@@ -1,0 +1,443 @@
+//! The page decoder: a page's encoded bytes (FORMAT.md §4.3) straight to its GPU layout (§5),
+//! the layout the writer lays out ([`crate::write`]), byte for byte.
+//!
+//! One pass rebuilds every vertex of the page into flat buffers reused from page to page (no
+//! allocation per cluster or vertex but the index codec's output); a second lays the page out
+//! into one buffer of the size the page table gives, allocated once its size is known to match.
+//! The writer decodes every page it writes here and compares the result with the page it laid
+//! out itself, so the two layouts cannot drift apart.
+
+use super::codec::{encoded_len, index_bound, invalid, totals, unzigzag16, unzigzag32, walk};
+use super::codec::{EdgeTable, Invalid, Lanes, Predictor, PREAMBLE};
+use super::records::ClusterHeader;
+use super::*;
+use std::cell::RefCell;
+
+/// Buffers the decoder reuses from page to page (one set per thread).
+struct Scratch {
+    edges: EdgeTable,
+    positions: Vec<[i32; 3]>,
+    normals: Vec<[u16; 2]>,
+    uvs: Vec<[u16; 2]>,
+    indices: Vec<u8>,
+    /// One cluster's predictors, then its residuals in decoding order and its values by slot
+    /// (see [`Sources::rebuild`]); never cleared, as each cluster writes what it reads.
+    sources: Sources,
+    wide: Box<Residuals<[i32; 3]>>,
+    pairs: Box<Residuals<[u16; 2]>>,
+}
+
+/// One attribute of one cluster while it is rebuilt: its residuals in decoding order and its
+/// values by slot.
+struct Residuals<T> {
+    residuals: [T; MAX_CLUSTER_VERTICES],
+    values: [T; SLOTS],
+}
+
+impl<T: Lanes> Residuals<T> {
+    fn new() -> Box<Residuals<T>> {
+        Box::new(Residuals { residuals: [T::default(); MAX_CLUSTER_VERTICES], values: [T::default(); SLOTS] })
+    }
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Option<Scratch>> = const { RefCell::new(None) };
+}
+
+/// The sections of an encoded page (FORMAT.md §4.3), their lengths checked against the
+/// page's counts.
+struct Sections<'a> {
+    lengths: &'a [u8],
+    coded: &'a [u8],
+    marks: &'a [u8],
+    /// Position planes, each `3 × vertices` bytes.
+    positions: &'a [u8],
+    planes: usize,
+    normals: &'a [u8],
+    uvs: &'a [u8],
+    materials: &'a [u8],
+}
+
+impl<'a> Sections<'a> {
+    fn split(bytes: &'a [u8], records: &[ClusterInfo], flags: u32) -> Result<Sections<'a>, Invalid> {
+        let (v, t) = totals(records);
+        if bytes.len() < PREAMBLE + 2 * records.len() {
+            return invalid("encoded page ends early");
+        }
+        let (preamble, rest) = bytes.split_at(PREAMBLE);
+        let planes = preamble[0] as usize;
+        if !(1..=4).contains(&planes) || preamble[1..] != [0, 0, 0] {
+            return invalid("preamble: plane count outside 1..=4 or reserved bytes not zero");
+        }
+        let (lengths, rest) = rest.split_at(2 * records.len());
+        let index_bytes: usize = lengths.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]]) as usize).sum();
+        let expected = encoded_len(flags, records.len(), (v, t), index_bytes, planes);
+        if bytes.len() != expected {
+            return invalid(format!("{} encoded bytes, its counts and lengths need {expected}", bytes.len()));
+        }
+        // The total length matches every section below, so none of these splits runs short.
+        let with = |flag: u32, n: usize| if flags & flag != 0 { n } else { 0 };
+        let (coded, rest) = rest.split_at(index_bytes);
+        let (marks, rest) = rest.split_at(t);
+        let (positions, rest) = rest.split_at(planes * 3 * v);
+        let (normals, rest) = rest.split_at(with(FLAG_NORMALS, 4 * v));
+        let (uvs, materials) = rest.split_at(with(FLAG_UVS, 4 * v));
+        if let Some(m) = marks.iter().find(|&&m| m > 7) {
+            return invalid(format!("open-edge mark {m} has bits above bit 2"));
+        }
+        Ok(Sections { lengths, coded, marks, positions, planes, normals, uvs, materials })
+    }
+}
+
+/// Decodes a page's encoded bytes (FORMAT.md §4.3) to its GPU layout (§5), which must be
+/// exactly `raw_size` bytes; `records` are the page's cluster records. Every index,
+/// octahedral value and mark is checked against its range, the section lengths against the
+/// counts; nothing is allocated beyond the page's counts and `raw_size`.
+pub(crate) fn decode_page_gpu(
+    bytes: &[u8],
+    records: &[ClusterInfo],
+    flags: u32,
+    normal_bits: u32,
+    raw_size: usize,
+) -> Result<Vec<u8>, Invalid> {
+    SCRATCH.with(|cell| {
+        let mut cell = cell.borrow_mut();
+        let scratch = cell.get_or_insert_with(|| Scratch {
+            edges: EdgeTable::new(),
+            positions: Vec::new(),
+            normals: Vec::new(),
+            uvs: Vec::new(),
+            indices: Vec::new(),
+            sources: Sources::default(),
+            wide: Residuals::new(),
+            pairs: Residuals::new(),
+        });
+        let s = Sections::split(bytes, records, flags)?;
+        scratch.rebuild(&s, records, flags, normal_bits)?;
+        scratch.lay_out(&s, records, flags, raw_size)
+    })
+}
+
+impl Scratch {
+    /// Every vertex's values and every cluster's indices, page-wide and in cluster order
+    /// (vertices at their local index within their cluster's range).
+    fn rebuild(&mut self, s: &Sections, records: &[ClusterInfo], flags: u32, normal_bits: u32) -> Result<(), Invalid> {
+        let (v_total, t_total) = totals(records);
+        let (normals, uvs) = (flags & FLAG_NORMALS != 0, flags & FLAG_UVS != 0);
+        // Every vertex is written before it is read (see `Sources`), so only growth zeroes.
+        grow(&mut self.positions, v_total);
+        grow(&mut self.normals, if normals { v_total } else { 0 });
+        grow(&mut self.uvs, if uvs { v_total } else { 0 });
+        self.indices.clear();
+        self.indices.reserve(3 * t_total);
+        let mut anchors = (<[i32; 3]>::default(), <[u16; 2]>::default(), <[u16; 2]>::default());
+        let (mut vo, mut io) = (0usize, 0usize);
+        let (sources, wide, pairs) = (&mut self.sources, &mut *self.wide, &mut *self.pairs);
+        for (r, len) in records.iter().zip(s.lengths.chunks_exact(2)) {
+            let (vc, tc) = (r.vertex_count as usize, r.triangle_count as usize);
+            let len = u16::from_le_bytes([len[0], len[1]]) as usize;
+            let start = self.indices.len();
+            decode_indices(&s.coded[io..io + len], vc, tc, &mut self.indices)?;
+            sources.walk(&self.indices[start..], vc, &mut self.edges);
+            position_residuals(s, vo, vc, v_total, &mut wide.residuals);
+            anchors.0 = sources.rebuild(wide, vc, anchors.0, &mut self.positions[vo..vo + vc]);
+            if normals {
+                pair_residuals(s.normals, vo, vc, v_total, &mut pairs.residuals);
+                anchors.1 = sources.rebuild(pairs, vc, anchors.1, &mut self.normals[vo..vo + vc]);
+            }
+            if uvs {
+                pair_residuals(s.uvs, vo, vc, v_total, &mut pairs.residuals);
+                anchors.2 = sources.rebuild(pairs, vc, anchors.2, &mut self.uvs[vo..vo + vc]);
+            }
+            (vo, io) = (vo + vc, io + len);
+        }
+        let max_normal = ((1u32 << normal_bits.min(16)) - 1) as u16;
+        if let Some(n) = self.normals[..if normals { v_total } else { 0 }].iter().flatten().find(|&&n| n > max_normal) {
+            return invalid(format!("octahedral value {n} above {max_normal}"));
+        }
+        Ok(())
+    }
+
+    /// The GPU layout of the rebuilt page, as the writer lays it out: every cluster header,
+    /// then each kind of block for every cluster in turn, each block padded to 4 bytes.
+    fn lay_out(&self, s: &Sections, records: &[ClusterInfo], flags: u32, raw_size: usize) -> Result<Vec<u8>, Invalid> {
+        let mut headers = self.headers(s, records, flags);
+        let end = place_blocks(&mut headers, flags);
+        if end != raw_size {
+            return invalid(format!("decodes to {end} bytes, table says {raw_size}"));
+        }
+        let mut raw = vec![0u8; raw_size];
+        let (mut vo, mut to) = (0usize, 0usize);
+        for (i, h) in headers.iter().enumerate() {
+            raw[i * CLUSTER_HEADER_SIZE..][..CLUSTER_HEADER_SIZE].copy_from_slice(&h.encode());
+            let (vc, tc) = (h.vertex_count as usize, h.triangle_count as usize);
+            self.write_blocks(&mut raw, h, s, (vo, vc), (to, tc), flags);
+            (vo, to) = (vo + vc, to + tc);
+        }
+        Ok(raw)
+    }
+
+    /// Each cluster's header, block offsets not yet set: value ranges and bit widths of its
+    /// positions and normals, and whether it has an open-edge block.
+    fn headers(&self, s: &Sections, records: &[ClusterInfo], flags: u32) -> Vec<ClusterHeader> {
+        let (mut vo, mut to) = (0usize, 0usize);
+        let mut out = Vec::with_capacity(records.len());
+        for r in records {
+            let (vc, tc) = (r.vertex_count as usize, r.triangle_count as usize);
+            let (position_min, position_bits) = ranges(self.positions[vo..vo + vc].iter().map(|p| p.map(i64::from)));
+            let mut h = ClusterHeader {
+                vertex_count: r.vertex_count,
+                triangle_count: r.triangle_count,
+                position_min: position_min.map(|v| v as i32),
+                position_bits,
+                block_offsets: [0; 5],
+                normal_min: [0; 2],
+                normal_bits: [0; 2],
+                edge_flags: 0,
+            };
+            if flags & FLAG_NORMALS != 0 {
+                let (lo, bits) = ranges(self.normals[vo..vo + vc].iter().map(|n| n.map(i64::from)));
+                (h.normal_min, h.normal_bits) = (lo.map(|v| v as u16), bits);
+            }
+            if s.marks[to..to + tc].iter().any(|&m| m != 0) {
+                h.edge_flags = ClusterHeader::OPEN_EDGES;
+            }
+            out.push(h);
+            (vo, to) = (vo + vc, to + tc);
+        }
+        out
+    }
+
+    /// Writes one cluster's blocks at its header's offsets; `vertices` and `triangles` are
+    /// (first, count) in the page.
+    fn write_blocks(
+        &self,
+        raw: &mut [u8],
+        h: &ClusterHeader,
+        s: &Sections,
+        (vo, vc): (usize, usize),
+        (to, tc): (usize, usize),
+        flags: u32,
+    ) {
+        let lens = block_lengths(h);
+        let block = |slot: usize| {
+            let at = h.block_offsets[slot] as usize;
+            at..at + lens[slot]
+        };
+        let lo = h.position_min;
+        let bits = h.position_bits.map(u32::from);
+        let deltas =
+            self.positions[vo..vo + vc].iter().map(|p| std::array::from_fn(|k| p[k].wrapping_sub(lo[k]) as u32));
+        let r = block(ClusterHeader::POSITIONS);
+        pack(&mut raw[r], deltas, bits);
+        if flags & FLAG_NORMALS != 0 {
+            let lo = h.normal_min;
+            let deltas =
+                self.normals[vo..vo + vc].iter().map(|n| std::array::from_fn(|k| n[k].wrapping_sub(lo[k]) as u32));
+            let r = block(ClusterHeader::NORMALS);
+            pack(&mut raw[r], deltas, h.normal_bits.map(u32::from));
+        }
+        if flags & FLAG_UVS != 0 {
+            let r = block(ClusterHeader::UVS);
+            for (out, uv) in raw[r].chunks_exact_mut(4).zip(&self.uvs[vo..vo + vc]) {
+                out[..2].copy_from_slice(&uv[0].to_le_bytes());
+                out[2..].copy_from_slice(&uv[1].to_le_bytes());
+            }
+        }
+        let r = block(ClusterHeader::INDICES);
+        let indices = &mut raw[r];
+        indices[..3 * tc].copy_from_slice(&self.indices[3 * to..3 * (to + tc)]);
+        if h.edge_flags & ClusterHeader::OPEN_EDGES != 0 {
+            let marks = s.marks[to..to + tc].iter().map(|&m| [m as u32]);
+            pack(&mut indices[(3 * tc).next_multiple_of(4)..], marks, [3]);
+        }
+        if flags & FLAG_MATERIALS != 0 {
+            let t_total = s.materials.len() / 2;
+            let r = block(ClusterHeader::MATERIALS);
+            for (i, out) in raw[r].chunks_exact_mut(2).enumerate() {
+                out.copy_from_slice(&[s.materials[to + i], s.materials[t_total + to + i]]);
+            }
+        }
+    }
+}
+
+/// `v` at least `len` long, reusing its allocation (what it holds is overwritten).
+fn grow<T: Default + Clone>(v: &mut Vec<T>, len: usize) {
+    if v.len() < len {
+        v.resize(len, T::default());
+    }
+}
+
+/// Slot of a cluster's anchor (the previous cluster's first vertex) in [`Sources::rebuild`]'s
+/// values, after the 256 vertex slots.
+const ANCHOR: u16 = 256;
+/// Slot of zero, which a one-vertex prediction adds and subtracts.
+const ZERO: u16 = 257;
+/// Value slots: a power of two, so that a slot index masks into range without a check.
+const SLOTS: usize = 512;
+
+/// A cluster's vertices in decoding order, each with the three value slots its prediction
+/// `a + b − d` reads: a parallelogram reads three decoded vertices, a neighbour `(n, ZERO,
+/// ZERO)`, the anchor `(ANCHOR, ZERO, ZERO)`. One branch-free form for every predictor, so that
+/// each attribute is rebuilt in one tight loop.
+struct Sources {
+    vertex: [u8; MAX_CLUSTER_VERTICES],
+    slots: [[u16; 3]; MAX_CLUSTER_VERTICES],
+    len: usize,
+}
+
+impl Default for Sources {
+    fn default() -> Sources {
+        Sources { vertex: [0; MAX_CLUSTER_VERTICES], slots: [[0; 3]; MAX_CLUSTER_VERTICES], len: 0 }
+    }
+}
+
+impl Sources {
+    /// The predictors of a cluster whose indices are all below `vertex_count`.
+    fn walk(&mut self, indices: &[u8], vertex_count: usize, edges: &mut EdgeTable) {
+        self.len = 0;
+        walk(indices, vertex_count, edges, |v, p| {
+            if let (Some(vertex), Some(slots)) = (self.vertex.get_mut(self.len), self.slots.get_mut(self.len)) {
+                *vertex = v;
+                *slots = match p {
+                    Predictor::Parallelogram(a, b, d) => [a as u16, b as u16, d as u16],
+                    Predictor::Neighbour(a) => [a as u16, ZERO, ZERO],
+                    Predictor::Anchor => [ANCHOR, ZERO, ZERO],
+                };
+            }
+            self.len += 1;
+        });
+    }
+
+    /// Each vertex's value (prediction plus residual, `residuals` in decoding order) into
+    /// `out`, indexed by vertex; returns the first decoded vertex's value, the next
+    /// cluster's anchor. Every slot a prediction reads was written before: the walk predicts
+    /// only from vertices it has visited.
+    fn rebuild<T: Lanes>(&self, r: &mut Residuals<T>, vc: usize, anchor: T, out: &mut [T]) -> T {
+        let values = &mut r.values;
+        values[ANCHOR as usize] = anchor;
+        values[ZERO as usize] = T::default();
+        let n = self.len.min(vc).min(MAX_CLUSTER_VERTICES);
+        for ((&v, s), &r) in self.vertex[..n].iter().zip(&self.slots[..n]).zip(&r.residuals[..n]) {
+            let at = |i: u16| values[i as usize % SLOTS];
+            values[v as usize] = at(s[0]).add(at(s[1])).sub(at(s[2])).add(r);
+        }
+        let len = out.len().min(MAX_CLUSTER_VERTICES);
+        out[..len].copy_from_slice(&values[..len]);
+        values[self.vertex[0] as usize]
+    }
+}
+
+/// The position residuals of the cluster whose vertices start at page vertex `vo`, in
+/// decoding order, from the page's byte planes.
+fn position_residuals(s: &Sections, vo: usize, vc: usize, v_total: usize, out: &mut [[i32; 3]]) {
+    let out = &mut out[..vc];
+    let plane = |p: usize| s.positions[p * 3 * v_total + 3 * vo..][..3 * vc].chunks_exact(3);
+    for (o, b) in out.iter_mut().zip(plane(0)) {
+        *o = [b[0] as i32, b[1] as i32, b[2] as i32];
+    }
+    for p in 1..s.planes {
+        for (o, b) in out.iter_mut().zip(plane(p)) {
+            for k in 0..3 {
+                o[k] |= (b[k] as i32) << (8 * p);
+            }
+        }
+    }
+    for o in out.iter_mut() {
+        *o = o.map(|z| unzigzag32(z as u32));
+    }
+}
+
+/// The residuals of a two-plane pair section (normals or UVs) for the cluster whose vertices
+/// start at page vertex `vo`, in decoding order.
+fn pair_residuals(planes: &[u8], vo: usize, vc: usize, v_total: usize, out: &mut [[u16; 2]]) {
+    let low = &planes[2 * vo..][..2 * vc];
+    let high = &planes[2 * v_total + 2 * vo..][..2 * vc];
+    for ((out, l), h) in out.iter_mut().zip(low.chunks_exact(2)).zip(high.chunks_exact(2)) {
+        *out = [unzigzag16(u16::from_le_bytes([l[0], h[0]])), unzigzag16(u16::from_le_bytes([l[1], h[1]]))];
+    }
+}
+
+/// A cluster's local indices from meshoptimizer's index codec, each checked to name a vertex
+/// of the cluster, appended to `out`.
+fn decode_indices(coded: &[u8], vertex_count: usize, triangle_count: usize, out: &mut Vec<u8>) -> Result<(), Invalid> {
+    if coded.len() > index_bound(triangle_count) {
+        return invalid(format!("{} bytes of coded indices for {triangle_count} triangles", coded.len()));
+    }
+    let wide: Vec<u16> =
+        meshopt::decode_index_buffer(coded, 3 * triangle_count).map_err(|e| Invalid(format!("index codec: {e}")))?;
+    // The largest index alone decides (a branch-free scan, where finding the first
+    // offender branched per index).
+    if let Some(&i) = wide.iter().max().filter(|&&i| i as usize >= vertex_count) {
+        return invalid(format!("local index {i} out of {vertex_count} vertices"));
+    }
+    out.extend(wide.iter().map(|&i| i as u8));
+    Ok(())
+}
+
+/// Per-component minimum of a cluster's values and the bits that hold each component's range.
+fn ranges<const N: usize>(values: impl Iterator<Item = [i64; N]>) -> ([i64; N], [u8; N]) {
+    let mut lo = [i64::MAX; N];
+    let mut hi = [i64::MIN; N];
+    for v in values {
+        for k in 0..N {
+            lo[k] = lo[k].min(v[k]);
+            hi[k] = hi[k].max(v[k]);
+        }
+    }
+    (lo, std::array::from_fn(|k| bits::bits_for((hi[k] - lo[k]) as u32) as u8))
+}
+
+/// Unpadded length of each block of a cluster (FORMAT.md §5); the indices block includes its
+/// padding and open-edge block when it has one.
+fn block_lengths(h: &ClusterHeader) -> [usize; 5] {
+    let (v, t) = (h.vertex_count as usize, h.triangle_count as usize);
+    let words = |bits: usize| bits.div_ceil(32) * 4;
+    let sum = |b: &[u8]| b.iter().map(|&b| b as usize).sum::<usize>();
+    let indices = match h.edge_flags & ClusterHeader::OPEN_EDGES {
+        0 => 3 * t,
+        _ => (3 * t).next_multiple_of(4) + words(3 * t),
+    };
+    [words(v * sum(&h.position_bits)), words(v * sum(&h.normal_bits)), 4 * v, indices, 2 * t]
+}
+
+/// Sets each header's block offsets as the writer places blocks (every cluster's block of
+/// one kind, then the next kind; each padded to 4 bytes; kinds the file does not carry
+/// absent) and returns the page's length.
+fn place_blocks(headers: &mut [ClusterHeader], flags: u32) -> usize {
+    let present = [true, flags & FLAG_NORMALS != 0, flags & FLAG_UVS != 0, true, flags & FLAG_MATERIALS != 0];
+    let mut end = headers.len() * CLUSTER_HEADER_SIZE;
+    for slot in (0..5).filter(|&k| present[k]) {
+        for h in headers.iter_mut() {
+            h.block_offsets[slot] = end as u32;
+            end += block_lengths(h)[slot].next_multiple_of(4);
+        }
+    }
+    end
+}
+
+/// Packs records of bit fields of the given widths (each value below 2^width) LSB first into
+/// little-endian u32 words (FORMAT.md §5.2); `out` is exactly the words' bytes, zeroed.
+fn pack<const N: usize>(out: &mut [u8], values: impl Iterator<Item = [u32; N]>, widths: [u32; N]) {
+    let (mut acc, mut fill, mut at) = (0u64, 0u32, 0usize);
+    let mut flush = |word: u32, at: &mut usize| {
+        if let Some(w) = out.get_mut(*at..*at + 4) {
+            w.copy_from_slice(&word.to_le_bytes());
+        }
+        *at += 4;
+    };
+    for v in values {
+        for k in 0..N {
+            acc |= (v[k] as u64) << fill;
+            fill += widths[k];
+            if fill >= 32 {
+                flush(acc as u32, &mut at);
+                acc >>= 32;
+                fill -= 32;
+            }
+        }
+    }
+    if fill > 0 {
+        flush(acc as u32, &mut at);
+    }
+}
