@@ -469,16 +469,16 @@ fn decode_indices(coded: &[u8], vertex_count: usize, triangle_count: usize) -> R
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn record(vertex_count: u16, triangle_count: u16) -> ClusterInfo {
+    pub(crate) fn record(vertex_count: u16, triangle_count: u16) -> ClusterInfo {
         ClusterInfo { group: 0, own_group: NO_GROUP, vertex_count, triangle_count, page_offset: 0 }
     }
 
     /// A strip of `n` vertices with every attribute, including extreme values that wrap, in
     /// the form the writer stores (triangles as the index codec gives them back).
-    fn sample(n: usize, seed: i32) -> Quantized {
+    pub(crate) fn sample(n: usize, seed: i32) -> Quantized {
         let positions: Vec<[i32; 3]> = (0..n as i32)
             .map(|i| [i * 37 + seed, i32::MAX - i * i, if i % 5 == 0 { i32::MIN } else { i * 3 }])
             .collect();
@@ -500,7 +500,7 @@ mod tests {
         }
     }
 
-    fn records(clusters: &[Quantized]) -> Vec<ClusterInfo> {
+    pub(crate) fn records(clusters: &[Quantized]) -> Vec<ClusterInfo> {
         clusters.iter().map(|c| record(c.positions.len() as u16, c.marks.len() as u16)).collect()
     }
 
@@ -522,47 +522,6 @@ mod tests {
         // One byte more or less is refused.
         assert!(decode_page(&bytes[..bytes.len() - 1], &records(&bare), 0, 0).is_err());
         assert!(decode_page(&[&bytes[..], &[0]].concat(), &records(&bare), 0, 0).is_err());
-    }
-
-    /// The fast decoder against this reference one and the writer's layout: the same GPU
-    /// bytes for a well-formed page, and for every corruption either both refuse it or both
-    /// give the same bytes. `raw_size` is the intact page's: what the page table would say.
-    fn agree(bytes: &[u8], records: &[ClusterInfo], flags: u32, normal_bits: u32, raw_size: usize) -> bool {
-        let reference = decode_page(bytes, records, flags, normal_bits).map(|q| crate::write::gpu_page(&q, flags));
-        let len = reference.as_ref().map_or(raw_size, Vec::len);
-        let fast = crate::decode::decode_page_gpu(bytes, records, flags, normal_bits, len);
-        reference.is_ok() == fast.is_ok() && reference.ok() == fast.ok()
-    }
-
-    #[test]
-    fn the_fast_decoder_agrees_with_the_reference() {
-        let clusters = [sample(3, 5), sample(256, -7), sample(40, 1 << 30)];
-        for flags in [0, FLAG_NORMALS, FLAG_UVS | FLAG_MATERIALS, FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS] {
-            let clusters: Vec<Quantized> = clusters
-                .iter()
-                .map(|c| Quantized {
-                    normals: if flags & FLAG_NORMALS != 0 { c.normals.clone() } else { vec![] },
-                    uvs: if flags & FLAG_UVS != 0 { c.uvs.clone() } else { vec![] },
-                    materials: if flags & FLAG_MATERIALS != 0 { c.materials.clone() } else { vec![] },
-                    ..c.clone()
-                })
-                .collect();
-            let records = records(&clusters);
-            let bytes: Vec<u8> = encode_page(&clusters, flags).unwrap().concat();
-            let gpu = crate::write::gpu_page(&clusters, flags);
-            assert_eq!(crate::decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len()), Ok(gpu.clone()));
-            // Any other raw size is refused.
-            assert!(crate::decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len() + 4).is_err());
-            for i in 0..bytes.len() {
-                let mut bad = bytes.clone();
-                bad[i] ^= 1 << (i % 8);
-                assert!(agree(&bad, &records, flags, 10, gpu.len()), "flags {flags}: byte {i} flipped");
-            }
-            for cut in (0..bytes.len()).step_by(7) {
-                assert!(agree(&bytes[..cut], &records, flags, 10, gpu.len()), "flags {flags}: cut at {cut}");
-            }
-            assert!(agree(&bytes, &records, flags, 9, gpu.len()));
-        }
     }
 
     #[test]

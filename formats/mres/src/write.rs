@@ -711,3 +711,51 @@ fn page_dependencies(pages: &[PageSpan], groups: &[Group], clusters: &[ClusterIn
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codec::tests::{records, sample};
+
+    /// The fast decoder against this reference one and the writer's layout: the same GPU
+    /// bytes for a well-formed page, and for every corruption either both refuse it or both
+    /// give the same bytes. `raw_size` is the intact page's: what the page table would say.
+    fn agree(bytes: &[u8], records: &[ClusterInfo], flags: u32, normal_bits: u32, raw_size: usize) -> bool {
+        let reference = codec::decode_page(bytes, records, flags, normal_bits).map(|q| gpu_page(&q, flags));
+        let len = reference.as_ref().map_or(raw_size, Vec::len);
+        let fast = decode::decode_page_gpu(bytes, records, flags, normal_bits, len);
+        reference.is_ok() == fast.is_ok() && reference.ok() == fast.ok()
+    }
+
+    #[test]
+    fn the_fast_decoder_agrees_with_the_reference() {
+        let clusters = [sample(3, 5), sample(256, -7), sample(40, 1 << 30)];
+        for flags in [0, FLAG_NORMALS, FLAG_UVS | FLAG_MATERIALS, FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS] {
+            let clusters: Vec<Quantized> = clusters
+                .iter()
+                .map(|c| Quantized {
+                    normals: if flags & FLAG_NORMALS != 0 { c.normals.clone() } else { vec![] },
+                    uvs: if flags & FLAG_UVS != 0 { c.uvs.clone() } else { vec![] },
+                    materials: if flags & FLAG_MATERIALS != 0 { c.materials.clone() } else { vec![] },
+                    ..c.clone()
+                })
+                .collect();
+            let records = records(&clusters);
+            let bytes: Vec<u8> = codec::encode_page(&clusters, flags).unwrap().concat();
+            let gpu = gpu_page(&clusters, flags);
+            assert_eq!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len()), Ok(gpu.clone()));
+            // Any other raw size is refused.
+            assert!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len() + 4).is_err());
+            for i in 0..bytes.len() {
+                let mut bad = bytes.clone();
+                bad[i] ^= 1 << (i % 8);
+                assert!(agree(&bad, &records, flags, 10, gpu.len()), "flags {flags}: byte {i} flipped");
+            }
+            for cut in (0..bytes.len()).step_by(7) {
+                assert!(agree(&bytes[..cut], &records, flags, 10, gpu.len()), "flags {flags}: cut at {cut}");
+            }
+            assert!(agree(&bytes, &records, flags, 9, gpu.len()));
+        }
+    }
+
+}
