@@ -757,5 +757,4 @@ mod tests {
             assert!(agree(&bytes, &records, flags, 9, gpu.len()));
         }
     }
-
 }
