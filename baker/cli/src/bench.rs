@@ -25,6 +25,12 @@ pub const DEFAULT_SAMPLES: usize = 200_000;
 /// Measured errors (× diagonal) at which the builders' triangle counts are compared.
 pub const TARGET_ERRORS: [f64; 5] = [1e-4, 3e-4, 1e-3, 3e-3, 1e-2];
 
+/// Measured errors (× diagonal) below this count as exact in [`triangles_at`]: a tenth of the
+/// finest target. The full-detail cut measures about 1e-16 (rounding) for clusterlod and up to
+/// about 1e-5 for us (the 16-bit position grid); neither is a point of the error-triangles
+/// curve, and taken as one, log-log interpolation from it jumps to almost the next cut's count.
+pub const EXACT_BELOW: f64 = 1e-5;
+
 /// Uniform-cut thresholds (× diagonal) every builder is cut at: 0 (the finest cut) and 24
 /// log-spaced values from 1e-5 to 1e-1. The coarsest cut is added per builder.
 pub fn relative_thresholds() -> Vec<f64> {
@@ -303,7 +309,7 @@ pub fn measure(built: Built, input: &Surface, max_samples: usize) -> BuilderRun 
 /// error, triangles) cut points: on the lower envelope of the points (sorted by error, each
 /// kept only if it has fewer triangles than every finer one), interpolated log-log between
 /// the two envelope points that bracket `target` — the count of the finer one where its
-/// error is 0 (no logarithm). `None` where no cut is that accurate; the coarsest envelope
+/// error is below [`EXACT_BELOW`] (an exact cut: no curve to follow from it). `None` where no cut is that accurate; the coarsest envelope
 /// point's count beyond the coarsest cut. Monotone: never more triangles for a larger target.
 pub fn triangles_at(points: &[(f64, u64)], target: f64) -> Option<f64> {
     let mut sorted: Vec<(f64, u64)> = points.iter().copied().filter(|p| p.0.is_finite()).collect();
@@ -317,7 +323,7 @@ pub fn triangles_at(points: &[(f64, u64)], target: f64) -> Option<f64> {
     let i = envelope.iter().rposition(|p| p.0 <= target)?;
     let (e0, t0) = envelope[i];
     let Some(&(e1, t1)) = envelope.get(i + 1) else { return Some(t0 as f64) };
-    if e0 <= 0.0 || t1 == 0 || target == e0 {
+    if e0 < EXACT_BELOW || t1 == 0 || target == e0 {
         return Some(t0 as f64);
     }
     let f = (target.ln() - e0.ln()) / (e1.ln() - e0.ln());
@@ -409,6 +415,11 @@ mod tests {
         assert_eq!(triangles_at(&points, 0.0), Some(1000.0));
         // Between an exact cut and the next: the exact cut's count.
         assert_eq!(triangles_at(&points, 5e-4), Some(1000.0));
+        // Also where "exact" is rounding noise or the position grid (below EXACT_BELOW).
+        for exact in [7.6e-17, 7.3e-6] {
+            let noisy = [(exact, 1000), (1e-3, 500)];
+            assert_eq!(triangles_at(&noisy, 1e-4), Some(1000.0), "{exact}");
+        }
         assert_eq!(triangles_at(&points, 1e-3), Some(500.0));
         // Halfway in log error between 1e-3 and 1e-2: the geometric mean of 500 and 50.
         let mid = triangles_at(&points, 10f64.powf(-2.5)).unwrap();
