@@ -75,17 +75,19 @@ impl<T: Real> Bvh<T> {
     pub fn new(tris: &[Triangle<T>]) -> Bvh<T> {
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
         let mut leaf_of = vec![0u32; tris.len()];
+        // Each triangle's box and centroid sum, once: every level of the build reads them.
+        let boxes: Vec<([T; 3], [T; 3])> = tris.iter().map(triangle_box).collect();
+        let centroids: Vec<[T; 3]> = tris.iter().map(|v| [0, 1, 2].map(|k| v[0][k] + v[1][k] + v[2][k])).collect();
         let empty = Node { lo: [T::ZERO; 3], hi: [T::ZERO; 3], start: 0, count: 0 };
         let mut nodes = vec![empty];
         let mut stack = vec![(0usize, 0usize, tris.len())];
         while let Some((node, start, end)) = stack.pop() {
             let (mut lo, mut hi) = ([T::INFINITY; 3], [T::NEG_INFINITY; 3]);
             for &t in &order[start..end] {
-                for v in &tris[t as usize] {
-                    for k in 0..3 {
-                        lo[k] = lo[k].min(v[k]);
-                        hi[k] = hi[k].max(v[k]);
-                    }
+                let (tlo, thi) = &boxes[t as usize];
+                for k in 0..3 {
+                    lo[k] = lo[k].min(tlo[k]);
+                    hi[k] = hi[k].max(thi[k]);
                 }
             }
             nodes[node].lo = lo;
@@ -106,10 +108,7 @@ impl<T: Real> Bvh<T> {
             } else {
                 2
             };
-            let centroid = |t: u32| {
-                let v = &tris[t as usize];
-                v[0][axis] + v[1][axis] + v[2][axis]
-            };
+            let centroid = |t: u32| centroids[t as usize][axis];
             let mid = (start + end) / 2;
             order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
                 centroid(a).partial_cmp(&centroid(b)).unwrap_or(std::cmp::Ordering::Equal)
@@ -204,6 +203,13 @@ impl<T: Real> Bvh<T> {
         }
         false
     }
+}
+
+/// The bounding box of triangle `t`.
+fn triangle_box<T: Real>(t: &Triangle<T>) -> ([T; 3], [T; 3]) {
+    let lo = [0, 1, 2].map(|k| t[0][k].min(t[1][k]).min(t[2][k]));
+    let hi = [0, 1, 2].map(|k| t[0][k].max(t[1][k]).max(t[2][k]));
+    (lo, hi)
 }
 
 fn box_distance2<T: Real>(n: &Node<T>, p: [T; 3]) -> T {
