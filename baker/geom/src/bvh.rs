@@ -153,46 +153,62 @@ impl<T: Real> Bvh<T> {
         if let Some(&leaf) = self.leaf_of.get(hint) {
             let d = point_triangle_distance2(p, &tris[hint]);
             best = (d, hint);
-            if d <= enough2 || self.leaf(tris, leaf, p, enough2, &mut best) {
+            // The hint itself cannot improve on `best` again: pass it as done.
+            if d <= enough2 || self.leaf(tris, leaf, p, enough2, hint, &mut best) {
                 return best;
             }
             skip = leaf;
         }
-        // Depth is at most ~2·log2(n) + 1; 96 entries cover any mesh that fits in memory.
-        let mut stack = [0u32; 96];
+        // Nodes to visit with their box distance, computed once when pushed; a node at least
+        // as far as `best` cannot hold a nearer triangle (`best` only shrinks), so it is not
+        // pushed. Depth is at most ~2·log2(n) + 1; 96 entries cover any mesh that fits in
+        // memory.
+        let mut stack = [(0u32, T::ZERO); 96];
+        stack[0] = (0, box_distance2(&self.nodes[0], p));
         let mut top = 1usize;
         while top > 0 {
             top -= 1;
-            let index = stack[top];
-            let n = &self.nodes[index as usize];
-            if index == skip || box_distance2(n, p) >= best.0 {
+            let (index, distance) = stack[top];
+            if index == skip || distance >= best.0 {
                 continue;
             }
+            let n = &self.nodes[index as usize];
             if n.count > 0 {
-                if self.leaf(tris, index, p, enough2, &mut best) {
+                if self.leaf(tris, index, p, enough2, usize::MAX, &mut best) {
                     return best;
                 }
             } else if top + 2 <= stack.len() {
                 let (a, b) = (n.start, n.start + 1);
-                let (near, far) =
-                    if box_distance2(&self.nodes[a as usize], p) <= box_distance2(&self.nodes[b as usize], p) {
-                        (a, b)
-                    } else {
-                        (b, a)
-                    };
-                stack[top] = far;
-                stack[top + 1] = near;
-                top += 2;
+                let (da, db) = (box_distance2(&self.nodes[a as usize], p), box_distance2(&self.nodes[b as usize], p));
+                let (near, far) = if da <= db { ((a, da), (b, db)) } else { ((b, db), (a, da)) };
+                // Far first, so that near is visited first.
+                for (child, d) in [far, near] {
+                    if d < best.0 {
+                        stack[top] = (child, d);
+                        top += 1;
+                    }
+                }
             }
         }
         best
     }
 
-    /// Tests the triangles of leaf `index` against `best` (squared distance, triangle); true
-    /// once one is within `enough2`.
-    fn leaf(&self, tris: &[Triangle<T>], index: u32, p: [T; 3], enough2: T, best: &mut (T, usize)) -> bool {
+    /// Tests the triangles of leaf `index` but `done` against `best` (squared distance,
+    /// triangle); true once one is within `enough2`.
+    fn leaf(
+        &self,
+        tris: &[Triangle<T>],
+        index: u32,
+        p: [T; 3],
+        enough2: T,
+        done: usize,
+        best: &mut (T, usize),
+    ) -> bool {
         let n = &self.nodes[index as usize];
         for &t in &self.order[n.start as usize..(n.start + n.count) as usize] {
+            if t as usize == done {
+                continue;
+            }
             let d = point_triangle_distance2(p, &tris[t as usize]);
             if d < best.0 {
                 *best = (d, t as usize);
@@ -291,5 +307,37 @@ mod tests {
         let bvh = Bvh::new(&small);
         let (d2, t) = bvh.nearest_squared(&small, [20.2, 0.2, -2.0], 0.0, 90);
         assert!((d2 - 4.0f32).abs() < 1e-5 && t == 20, "{d2} {t}");
+    }
+
+    /// Pseudo-random triangles in a unit cube (a fixed linear congruential sequence).
+    fn scattered(n: usize) -> Vec<Triangle<f32>> {
+        let mut state = 12345u64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|_| {
+                let a = [next(), next(), next()];
+                [a, a.map(|x| x + 0.05 * next()), a.map(|x| x - 0.05 * next())]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn queries_find_the_exact_nearest_or_one_within_enough() {
+        let tris = scattered(500);
+        let bvh = Bvh::new(&tris);
+        for (i, t) in scattered(200).iter().enumerate() {
+            let p = t[1].map(|x| x * 1.2 - 0.1);
+            let exact = tris.iter().map(|t| point_triangle_distance2(p, t)).fold(f32::INFINITY, f32::min);
+            for hint in [usize::MAX, i, 499] {
+                let (d2, t) = bvh.nearest_squared(&tris, p, 0.0, hint);
+                assert!(d2 == exact && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {exact}");
+                let enough2 = exact * 4.0;
+                let (d2, t) = bvh.nearest_squared(&tris, p, enough2, hint);
+                assert!(d2 <= enough2 && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {enough2}");
+            }
+        }
     }
 }
