@@ -150,7 +150,9 @@ pub type Owned = (u32, [u32; 3], u8);
 /// owned by several members are joined), sorted (so in Morton order).
 pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
     let mut all: Vec<Owned> = owned.collect();
-    all.sort_unstable();
+    // Each member's list is sorted (see `assign_owned`, and level 0's): the stable sort merges
+    // such runs instead of sorting from scratch, and on a total order it gives the same result.
+    all.sort();
     let mut out: Vec<Owned> = Vec::with_capacity(all.len());
     for (code, t, bits) in all {
         match out.last_mut() {

@@ -63,7 +63,9 @@ pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64]) -
         .map(|((indices, open), (samples, codes))| {
             let own_sphere = bounding_sphere(&indices, &mesh.positions);
             let owned = indices.chunks_exact(3).zip(samples).zip(codes);
-            let owned = owned.map(|((t, bits), code)| (code, [t[0], t[1], t[2]], bits)).collect();
+            let mut owned: Vec<Owned> = owned.map(|((t, bits), code)| (code, [t[0], t[1], t[2]], bits)).collect();
+            // Sorted, as every later cluster's is, so that `merge_owned` merges sorted runs.
+            owned.sort_unstable();
             BuiltCluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP, open, owned }
         })
         .collect()
