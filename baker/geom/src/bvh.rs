@@ -85,9 +85,16 @@ impl<T: Real> Bvh<T> {
             let (mut lo, mut hi) = ([T::INFINITY; 3], [T::NEG_INFINITY; 3]);
             for &t in &order[start..end] {
                 let (tlo, thi) = &boxes[t as usize];
+                // Comparisons rather than `min`/`max` (NaN rules cost instructions); on finite
+                // values the bounds are the same, up to the sign of a zero, which no distance
+                // or extent computed from them sees.
                 for k in 0..3 {
-                    lo[k] = lo[k].min(tlo[k]);
-                    hi[k] = hi[k].max(thi[k]);
+                    if tlo[k] < lo[k] {
+                        lo[k] = tlo[k];
+                    }
+                    if thi[k] > hi[k] {
+                        hi[k] = thi[k];
+                    }
                 }
             }
             nodes[node].lo = lo;
@@ -179,7 +186,8 @@ impl<T: Real> Bvh<T> {
                 }
             } else if top + 2 <= stack.len() {
                 let (a, b) = (n.start, n.start + 1);
-                let (da, db) = (box_distance2(&self.nodes[a as usize], p), box_distance2(&self.nodes[b as usize], p));
+                let pair = &self.nodes[a as usize..a as usize + 2]; // one bounds check for both
+                let (da, db) = (box_distance2(&pair[0], p), box_distance2(&pair[1], p));
                 let (near, far) = if da <= db { ((a, da), (b, db)) } else { ((b, db), (a, da)) };
                 // Far first, so that near is visited first.
                 for (child, d) in [far, near] {
@@ -195,6 +203,7 @@ impl<T: Real> Bvh<T> {
 
     /// Tests the triangles of leaf `index` but `done` against `best` (squared distance,
     /// triangle); true once one is within `enough2`.
+    #[inline]
     fn leaf(
         &self,
         tris: &[Triangle<T>],
@@ -228,9 +237,15 @@ fn triangle_box<T: Real>(t: &Triangle<T>) -> ([T; 3], [T; 3]) {
     (lo, hi)
 }
 
+/// Squared distance from `p` to the box of `n`.
 fn box_distance2<T: Real>(n: &Node<T>, p: [T; 3]) -> T {
-    let d = [0, 1, 2].map(|k| (n.lo[k] - p[k]).max(p[k] - n.hi[k]).max(T::ZERO));
-    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    // A plain comparison, not `max`: this runs on every visited node, and `max`'s NaN rules
+    // cost instructions. On the finite values here it gives the same result (up to the
+    // sign of a zero, which squaring removes).
+    let larger = |a: T, b: T| if a > b { a } else { b };
+    let axis = |k: usize| larger(larger(n.lo[k] - p[k], p[k] - n.hi[k]), T::ZERO);
+    let (x, y, z) = (axis(0), axis(1), axis(2));
+    x * x + y * y + z * z
 }
 
 /// Distance from `p` to triangle `t` (closest point by region, Ericson's "Real-Time Collision
