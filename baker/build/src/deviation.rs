@@ -163,6 +163,17 @@ pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
     out
 }
 
+/// The indices of the bits set among the low seven of `mask`, ascending: the samples a
+/// triangle's bits name (see [`Owned`]), found without testing all seven.
+fn set_bits(mask: u8) -> impl Iterator<Item = usize> {
+    let mut rest = mask & 0x7f;
+    std::iter::from_fn(move || {
+        let b = rest.trailing_zeros() as usize;
+        rest &= rest.wrapping_sub(1); // clears the lowest set bit
+        (b < 8).then_some(b)
+    })
+}
+
 /// The sample point of bit `b` of triangle `t` (see [`Owned`]).
 fn sample_point(t: &Triangle<f32>, b: usize) -> [f32; 3] {
     match b {
@@ -214,12 +225,13 @@ pub fn assign_owned(
     let mut hint = usize::MAX;
     for (i, &(code, t, mask)) in owned.iter().enumerate() {
         let (mut touched, mut count) = ([0usize; 7], 0);
-        for b in (0..7).filter(|b| mask >> b & 1 != 0) {
+        for b in set_bits(mask) {
             let f = found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
-            let kept = if b < 3 { at_corner.get(&id(t[b])) } else { None };
-            let nearest = match (f, kept) {
-                (NOT_FOUND, Some(&k)) => k as usize,
-                (NOT_FOUND, None) => {
+            // Looked up only for an unmeasured corner (most samples were measured).
+            let kept = || if b < 3 { at_corner.get(&id(t[b])) } else { None };
+            let nearest = match f {
+                NOT_FOUND if let Some(&k) = kept() => k as usize,
+                NOT_FOUND => {
                     // Not measured and not a kept corner: the output triangle nearest to it.
                     let bvh = bvh.get_or_insert_with(|| Bvh::new(&tris));
                     bvh.nearest_squared(&tris, sample_point(&t.map(point), b), close2 / 16.0, hint).1
@@ -392,8 +404,7 @@ fn measure(
     let mut worst = floor;
     let mut hot = Vec::new();
     // Samples of a triangle by its duty bits: corners, edge midpoints, centroid.
-    let samples =
-        |tri: Triangle<f32>, duty: u8| (0..7).filter(move |b| duty >> b & 1 != 0).map(move |b| sample_point(&tri, b));
+    let samples = |tri: Triangle<f32>, duty: u8| set_bits(duty).map(move |b| sample_point(&tri, b));
 
     // Output → input: the nearest input triangle's member error (any member's, until found
     // exactly).
@@ -534,7 +545,7 @@ impl InputSide<'_> {
                 let e = self.errors[i] + self.reach[i];
                 // A point farther than its part's size counts as that: the part vanished.
                 let size = part_size[id(t[0]) as usize];
-                for b in (0..7).filter(|b| (self.duty[i] & pass) >> b & 1 != 0) {
+                for b in set_bits(self.duty[i] & pass) {
                     let enough = limits.enough2(worst, e as f64);
                     let (d2, nearest) = bvh.nearest_squared(output, sample_point(tri, b), enough, hint);
                     hint = nearest;
@@ -593,7 +604,7 @@ fn accept_patches(
             hint = nearest;
             if d2 <= enough {
                 for i in run.clone() {
-                    for b in (0..7).filter(|b| duty[i] >> b & 1 != 0) {
+                    for b in set_bits(duty[i]) {
                         found[7 * i + b] = nearest as u32;
                     }
                     duty[i] = 0;
@@ -779,6 +790,14 @@ mod tests {
         let c = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]].map(at);
         let output = vec![c[0], c[1], c[2], c[0], c[2], c[3]];
         (w, input, output)
+    }
+
+    #[test]
+    fn set_bits_lists_the_low_seven_bits_ascending() {
+        for mask in 0..=255u8 {
+            let expected: Vec<usize> = (0..7).filter(|b| mask >> b & 1 != 0).collect();
+            assert_eq!(set_bits(mask).collect::<Vec<_>>(), expected, "{mask:#b}");
+        }
     }
 
     #[test]
