@@ -591,13 +591,13 @@ fn accept_patches(
     if input.is_empty() {
         return;
     }
-    let boxes = BoxPyramid::new(input, duty);
+    let boxes = BoxPyramid::new(input, duty, triangle_errors);
     let mut hint = usize::MAX;
     let mut stack = vec![(boxes.levels.len() - 1, 0)];
     while let Some((level, k)) = stack.pop() {
         let Some((center, radius)) = boxes.sphere(level, k) else { continue };
         let run = k << level..((k + 1) << level).min(input.len());
-        let limit = bound(triangle_errors[run.clone()].iter().copied().fold(0.0, f32::max));
+        let limit = bound(boxes.errors[level][k]);
         if radius < 0.5 * limit {
             let enough = (limit - radius) * (limit - radius);
             let (d2, nearest) = bvh.nearest_squared(output, center, enough, hint);
@@ -624,12 +624,15 @@ fn accept_patches(
 /// that trying patches costs little where none settles.
 struct BoxPyramid {
     levels: Vec<Vec<([f32; 3], [f32; 3])>>,
+    /// The same pyramid of the runs' largest triangle errors (a patch's bound needs it: one
+    /// lookup, not a pass over the run).
+    errors: Vec<Vec<f32>>,
 }
 
 impl BoxPyramid {
-    /// The pyramid over `triangles`; those whose `duty` is 0 have nothing to measure and get
-    /// an empty box.
-    fn new(triangles: &[Triangle<f32>], duty: &[u8]) -> BoxPyramid {
+    /// The pyramid over `triangles` with their `errors`; those whose `duty` is 0 have nothing
+    /// to measure and get an empty box.
+    fn new(triangles: &[Triangle<f32>], duty: &[u8], errors: &[f32]) -> BoxPyramid {
         let one = |(t, &d): (&Triangle<f32>, &u8)| {
             if d == 0 {
                 return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
@@ -650,7 +653,13 @@ impl BoxPyramid {
             let next = levels[levels.len() - 1].chunks(2).map(union).collect();
             levels.push(next);
         }
-        BoxPyramid { levels }
+        let mut error_levels = vec![errors.to_vec()];
+        while error_levels.len() < levels.len() {
+            let largest = |p: &[f32]| p.iter().copied().fold(0.0, f32::max);
+            let next = error_levels[error_levels.len() - 1].chunks(2).map(largest).collect();
+            error_levels.push(next);
+        }
+        BoxPyramid { levels, errors: error_levels }
     }
 
     /// The centre of box `k` of `level` and its half diagonal, padded for rounding (every
