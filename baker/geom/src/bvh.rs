@@ -168,9 +168,10 @@ impl<T: Real> Bvh<T> {
         }
         // Nodes to visit with their box distance, computed once when pushed; a node at least
         // as far as `best` cannot hold a nearer triangle (`best` only shrinks), so it is not
-        // pushed. Depth is at most ~2·log2(n) + 1; 96 entries cover any mesh that fits in
-        // memory.
-        let mut stack = [(0u32, T::ZERO); 96];
+        // pushed. The median split halves every node, so the depth is below 32 for any u32
+        // triangle count, and the stack holds at most one entry per level plus one: 64 cover
+        // every tree (and it is set up on every query that gets this far).
+        let mut stack = [(0u32, T::ZERO); 64];
         stack[0] = (0, box_distance2(&self.nodes[0], p));
         let mut top = 1usize;
         while top > 0 {
