@@ -633,12 +633,17 @@ impl BoxPyramid {
     /// The pyramid over `triangles` with their `errors`; those whose `duty` is 0 have nothing
     /// to measure and get an empty box.
     fn new(triangles: &[Triangle<f32>], duty: &[u8], errors: &[f32]) -> BoxPyramid {
+        // Comparisons rather than `min`/`max` (their NaN rules cost instructions on every
+        // triangle): on finite values the same bounds, up to the sign of a zero, which neither
+        // a centre's query nor a radius sees.
+        let (lesser, greater) =
+            (|a: f32, b: f32| if b < a { b } else { a }, |a: f32, b: f32| if b > a { b } else { a });
         let one = |(t, &d): (&Triangle<f32>, &u8)| {
             if d == 0 {
                 return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
             }
-            let lo = [0, 1, 2].map(|k| t[0][k].min(t[1][k]).min(t[2][k]));
-            let hi = [0, 1, 2].map(|k| t[0][k].max(t[1][k]).max(t[2][k]));
+            let lo = [0, 1, 2].map(|k| lesser(lesser(t[0][k], t[1][k]), t[2][k]));
+            let hi = [0, 1, 2].map(|k| greater(greater(t[0][k], t[1][k]), t[2][k]));
             (lo, hi)
         };
         let mut levels = vec![triangles.iter().zip(duty).map(one).collect::<Vec<_>>()];
@@ -646,7 +651,9 @@ impl BoxPyramid {
             let union = |p: &[([f32; 3], [f32; 3])]| {
                 let (mut lo, mut hi) = p[0];
                 for b in &p[1..] {
-                    (lo, hi) = ([0, 1, 2].map(|k| lo[k].min(b.0[k])), [0, 1, 2].map(|k| hi[k].max(b.1[k])));
+                    for k in 0..3 {
+                        (lo[k], hi[k]) = (lesser(lo[k], b.0[k]), greater(hi[k], b.1[k]));
+                    }
                 }
                 (lo, hi)
             };
