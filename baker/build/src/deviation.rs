@@ -153,14 +153,15 @@ pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
     // Each member's list is sorted (see `assign_owned`, and level 0's): the stable sort merges
     // such runs instead of sorting from scratch, and on a total order it gives the same result.
     all.sort();
-    let mut out: Vec<Owned> = Vec::with_capacity(all.len());
-    for (code, t, bits) in all {
-        match out.last_mut() {
-            Some(last) if last.1 == t => last.2 |= bits,
-            _ => out.push((code, t, bits)),
+    // In place: a triangle's entries are adjacent, the first one kept gets the bits of all.
+    all.dedup_by(|next, kept| {
+        let same = next.1 == kept.1;
+        if same {
+            kept.2 |= next.2;
         }
-    }
-    out
+        same
+    });
+    all
 }
 
 /// The indices of the bits set among the low seven of `mask`, ascending: the samples a
