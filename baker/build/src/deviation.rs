@@ -150,15 +150,29 @@ pub type Owned = (u32, [u32; 3], u8);
 /// owned by several members are joined), sorted (so in Morton order).
 pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
     let mut all: Vec<Owned> = owned.collect();
-    all.sort_unstable();
-    let mut out: Vec<Owned> = Vec::with_capacity(all.len());
-    for (code, t, bits) in all {
-        match out.last_mut() {
-            Some(last) if last.1 == t => last.2 |= bits,
-            _ => out.push((code, t, bits)),
+    // Each member's list is sorted (see `assign_owned`, and level 0's): the stable sort merges
+    // such runs instead of sorting from scratch, and on a total order it gives the same result.
+    all.sort();
+    // In place: a triangle's entries are adjacent, the first one kept gets the bits of all.
+    all.dedup_by(|next, kept| {
+        let same = next.1 == kept.1;
+        if same {
+            kept.2 |= next.2;
         }
-    }
-    out
+        same
+    });
+    all
+}
+
+/// The indices of the bits set among the low seven of `mask`, ascending: the samples a
+/// triangle's bits name (see [`Owned`]), found without testing all seven.
+fn set_bits(mask: u8) -> impl Iterator<Item = usize> {
+    let mut rest = mask & 0x7f;
+    std::iter::from_fn(move || {
+        let b = rest.trailing_zeros() as usize;
+        rest &= rest.wrapping_sub(1); // clears the lowest set bit
+        (b < 8).then_some(b)
+    })
 }
 
 /// The sample point of bit `b` of triangle `t` (see [`Owned`]).
@@ -212,12 +226,13 @@ pub fn assign_owned(
     let mut hint = usize::MAX;
     for (i, &(code, t, mask)) in owned.iter().enumerate() {
         let (mut touched, mut count) = ([0usize; 7], 0);
-        for b in (0..7).filter(|b| mask >> b & 1 != 0) {
+        for b in set_bits(mask) {
             let f = found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
-            let kept = if b < 3 { at_corner.get(&id(t[b])) } else { None };
-            let nearest = match (f, kept) {
-                (NOT_FOUND, Some(&k)) => k as usize,
-                (NOT_FOUND, None) => {
+            // Looked up only for an unmeasured corner (most samples were measured).
+            let kept = || if b < 3 { at_corner.get(&id(t[b])) } else { None };
+            let nearest = match f {
+                NOT_FOUND if let Some(&k) = kept() => k as usize,
+                NOT_FOUND => {
                     // Not measured and not a kept corner: the output triangle nearest to it.
                     let bvh = bvh.get_or_insert_with(|| Bvh::new(&tris));
                     bvh.nearest_squared(&tris, sample_point(&t.map(point), b), close2 / 16.0, hint).1
@@ -390,8 +405,7 @@ fn measure(
     let mut worst = floor;
     let mut hot = Vec::new();
     // Samples of a triangle by its duty bits: corners, edge midpoints, centroid.
-    let samples =
-        |tri: Triangle<f32>, duty: u8| (0..7).filter(move |b| duty >> b & 1 != 0).map(move |b| sample_point(&tri, b));
+    let samples = |tri: Triangle<f32>, duty: u8| set_bits(duty).map(move |b| sample_point(&tri, b));
 
     // Output → input: the nearest input triangle's member error (any member's, until found
     // exactly).
@@ -532,7 +546,7 @@ impl InputSide<'_> {
                 let e = self.errors[i] + self.reach[i];
                 // A point farther than its part's size counts as that: the part vanished.
                 let size = part_size[id(t[0]) as usize];
-                for b in (0..7).filter(|b| (self.duty[i] & pass) >> b & 1 != 0) {
+                for b in set_bits(self.duty[i] & pass) {
                     let enough = limits.enough2(worst, e as f64);
                     let (d2, nearest) = bvh.nearest_squared(output, sample_point(tri, b), enough, hint);
                     hint = nearest;
@@ -578,20 +592,20 @@ fn accept_patches(
     if input.is_empty() {
         return;
     }
-    let boxes = BoxPyramid::new(input, duty);
+    let boxes = BoxPyramid::new(input, duty, triangle_errors);
     let mut hint = usize::MAX;
     let mut stack = vec![(boxes.levels.len() - 1, 0)];
     while let Some((level, k)) = stack.pop() {
         let Some((center, radius)) = boxes.sphere(level, k) else { continue };
         let run = k << level..((k + 1) << level).min(input.len());
-        let limit = bound(triangle_errors[run.clone()].iter().copied().fold(0.0, f32::max));
+        let limit = bound(boxes.errors[level][k]);
         if radius < 0.5 * limit {
             let enough = (limit - radius) * (limit - radius);
             let (d2, nearest) = bvh.nearest_squared(output, center, enough, hint);
             hint = nearest;
             if d2 <= enough {
                 for i in run.clone() {
-                    for b in (0..7).filter(|b| duty[i] >> b & 1 != 0) {
+                    for b in set_bits(duty[i]) {
                         found[7 * i + b] = nearest as u32;
                     }
                     duty[i] = 0;
@@ -611,18 +625,26 @@ fn accept_patches(
 /// that trying patches costs little where none settles.
 struct BoxPyramid {
     levels: Vec<Vec<([f32; 3], [f32; 3])>>,
+    /// The same pyramid of the runs' largest triangle errors (a patch's bound needs it: one
+    /// lookup, not a pass over the run).
+    errors: Vec<Vec<f32>>,
 }
 
 impl BoxPyramid {
-    /// The pyramid over `triangles`; those whose `duty` is 0 have nothing to measure and get
-    /// an empty box.
-    fn new(triangles: &[Triangle<f32>], duty: &[u8]) -> BoxPyramid {
+    /// The pyramid over `triangles` with their `errors`; those whose `duty` is 0 have nothing
+    /// to measure and get an empty box.
+    fn new(triangles: &[Triangle<f32>], duty: &[u8], errors: &[f32]) -> BoxPyramid {
+        // Comparisons rather than `min`/`max` (their NaN rules cost instructions on every
+        // triangle): on finite values the same bounds, up to the sign of a zero, which neither
+        // a centre's query nor a radius sees.
+        let (lesser, greater) =
+            (|a: f32, b: f32| if b < a { b } else { a }, |a: f32, b: f32| if b > a { b } else { a });
         let one = |(t, &d): (&Triangle<f32>, &u8)| {
             if d == 0 {
                 return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
             }
-            let lo = [0, 1, 2].map(|k| t[0][k].min(t[1][k]).min(t[2][k]));
-            let hi = [0, 1, 2].map(|k| t[0][k].max(t[1][k]).max(t[2][k]));
+            let lo = [0, 1, 2].map(|k| lesser(lesser(t[0][k], t[1][k]), t[2][k]));
+            let hi = [0, 1, 2].map(|k| greater(greater(t[0][k], t[1][k]), t[2][k]));
             (lo, hi)
         };
         let mut levels = vec![triangles.iter().zip(duty).map(one).collect::<Vec<_>>()];
@@ -630,14 +652,22 @@ impl BoxPyramid {
             let union = |p: &[([f32; 3], [f32; 3])]| {
                 let (mut lo, mut hi) = p[0];
                 for b in &p[1..] {
-                    (lo, hi) = ([0, 1, 2].map(|k| lo[k].min(b.0[k])), [0, 1, 2].map(|k| hi[k].max(b.1[k])));
+                    for k in 0..3 {
+                        (lo[k], hi[k]) = (lesser(lo[k], b.0[k]), greater(hi[k], b.1[k]));
+                    }
                 }
                 (lo, hi)
             };
             let next = levels[levels.len() - 1].chunks(2).map(union).collect();
             levels.push(next);
         }
-        BoxPyramid { levels }
+        let mut error_levels = vec![errors.to_vec()];
+        while error_levels.len() < levels.len() {
+            let largest = |p: &[f32]| p.iter().copied().fold(0.0, f32::max);
+            let next = error_levels[error_levels.len() - 1].chunks(2).map(largest).collect();
+            error_levels.push(next);
+        }
+        BoxPyramid { levels, errors: error_levels }
     }
 
     /// The centre of box `k` of `level` and its half diagonal, padded for rounding (every
@@ -777,6 +807,14 @@ mod tests {
         let c = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]].map(at);
         let output = vec![c[0], c[1], c[2], c[0], c[2], c[3]];
         (w, input, output)
+    }
+
+    #[test]
+    fn set_bits_lists_the_low_seven_bits_ascending() {
+        for mask in 0..=255u8 {
+            let expected: Vec<usize> = (0..7).filter(|b| mask >> b & 1 != 0).collect();
+            assert_eq!(set_bits(mask).collect::<Vec<_>>(), expected, "{mask:#b}");
+        }
     }
 
     #[test]

@@ -16,7 +16,7 @@ use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Method};
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
-use mres_geom::edges::sorted_edge_keys;
+use mres_geom::edges::edge_keys;
 use rayon::prelude::*;
 use std::borrow::Cow;
 
@@ -63,7 +63,9 @@ pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64]) -
         .map(|((indices, open), (samples, codes))| {
             let own_sphere = bounding_sphere(&indices, &mesh.positions);
             let owned = indices.chunks_exact(3).zip(samples).zip(codes);
-            let owned = owned.map(|((t, bits), code)| (code, [t[0], t[1], t[2]], bits)).collect();
+            let mut owned: Vec<Owned> = owned.map(|((t, bits), code)| (code, [t[0], t[1], t[2]], bits)).collect();
+            // Sorted, as every later cluster's is, so that `merge_owned` merges sorted runs.
+            owned.sort_unstable();
             BuiltCluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP, open, owned }
         })
         .collect()
@@ -418,7 +420,8 @@ fn always_locked(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<u8> {
     let id = |v: u32| mesh.position_ids[v as usize];
     let (mut edges, mut marked): (Vec<u64>, Vec<u64>) = clusters
         .par_iter()
-        .map(|c| (sorted_edge_keys(&c.indices, id), open::marked_edges(mesh, &c.indices, &c.open)))
+        // Unsorted per cluster: the joined list is sorted once.
+        .map(|c| (edge_keys(&c.indices, id), open::marked_edges(mesh, &c.indices, &c.open)))
         .reduce(
             || (Vec::new(), Vec::new()),
             |mut a, b| {

@@ -256,25 +256,28 @@ impl EdgeCounts {
         let (mut bad, mut needed) = (Vec::new(), Vec::new());
         let mut seen = vec![false; self.border.len()];
         let all = |set: &[u32], e: u64| ends(e).iter().all(|p| set.binary_search(p).is_ok());
+        // Both lists are sorted: walk the border along the keys instead of searching it.
+        let mut next = 0;
         for run in keys.chunk_by(|a, b| a == b) {
             let e = run[0];
-            match self.border.binary_search_by_key(&e, |b| b.0) {
-                Ok(i) => {
-                    seen[i] = true;
-                    if self.border[i].1 != run.len() as u32 {
+            while next < self.border.len() && self.border[next].0 < e {
+                next += 1;
+            }
+            match self.border.get(next).filter(|b| b.0 == e) {
+                Some(&(_, uses, marks)) => {
+                    seen[next] = true;
+                    if uses != run.len() as u32 || marks > 1 {
                         bad.push(e);
-                    } else if self.border[i].2 == 1 {
+                    } else if marks == 1 {
                         needed.push(e);
-                    } else if self.border[i].2 > 1 {
-                        bad.push(e);
                     }
                 }
-                Err(_) if all(&self.locked, e) => bad.push(e),
+                None if all(&self.locked, e) => bad.push(e),
                 // A group that shares nothing (an isolated part, or the whole top) may open
                 // any edge: no neighbour can crack, and the measured error sees a hole.
-                Err(_) if run.len() % 2 == 1 && (all(&self.open, e) || self.isolated()) => needed.push(e),
-                Err(_) if run.len() % 2 == 1 => bad.push(e),
-                Err(_) => {}
+                None if run.len() % 2 == 1 && (all(&self.open, e) || self.isolated()) => needed.push(e),
+                None if run.len() % 2 == 1 => bad.push(e),
+                None => {}
             }
         }
         bad.extend(self.border.iter().zip(&seen).filter(|(_, s)| !**s).map(|(e, _)| e.0));

@@ -75,16 +75,25 @@ impl<T: Real> Bvh<T> {
     pub fn new(tris: &[Triangle<T>]) -> Bvh<T> {
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
         let mut leaf_of = vec![0u32; tris.len()];
+        // Each triangle's box and centroid sum, once: every level of the build reads them.
+        let boxes: Vec<([T; 3], [T; 3])> = tris.iter().map(triangle_box).collect();
+        let centroids: Vec<[T; 3]> = tris.iter().map(|v| [0, 1, 2].map(|k| v[0][k] + v[1][k] + v[2][k])).collect();
         let empty = Node { lo: [T::ZERO; 3], hi: [T::ZERO; 3], start: 0, count: 0 };
         let mut nodes = vec![empty];
         let mut stack = vec![(0usize, 0usize, tris.len())];
         while let Some((node, start, end)) = stack.pop() {
             let (mut lo, mut hi) = ([T::INFINITY; 3], [T::NEG_INFINITY; 3]);
             for &t in &order[start..end] {
-                for v in &tris[t as usize] {
-                    for k in 0..3 {
-                        lo[k] = lo[k].min(v[k]);
-                        hi[k] = hi[k].max(v[k]);
+                let (tlo, thi) = &boxes[t as usize];
+                // Comparisons rather than `min`/`max` (NaN rules cost instructions); on finite
+                // values the bounds are the same, up to the sign of a zero, which no distance
+                // or extent computed from them sees.
+                for k in 0..3 {
+                    if tlo[k] < lo[k] {
+                        lo[k] = tlo[k];
+                    }
+                    if thi[k] > hi[k] {
+                        hi[k] = thi[k];
                     }
                 }
             }
@@ -106,10 +115,7 @@ impl<T: Real> Bvh<T> {
             } else {
                 2
             };
-            let centroid = |t: u32| {
-                let v = &tris[t as usize];
-                v[0][axis] + v[1][axis] + v[2][axis]
-            };
+            let centroid = |t: u32| centroids[t as usize][axis];
             let mid = (start + end) / 2;
             order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
                 centroid(a).partial_cmp(&centroid(b)).unwrap_or(std::cmp::Ordering::Equal)
@@ -154,46 +160,65 @@ impl<T: Real> Bvh<T> {
         if let Some(&leaf) = self.leaf_of.get(hint) {
             let d = point_triangle_distance2(p, &tris[hint]);
             best = (d, hint);
-            if d <= enough2 || self.leaf(tris, leaf, p, enough2, &mut best) {
+            // The hint itself cannot improve on `best` again: pass it as done.
+            if d <= enough2 || self.leaf(tris, leaf, p, enough2, hint, &mut best) {
                 return best;
             }
             skip = leaf;
         }
-        // Depth is at most ~2·log2(n) + 1; 96 entries cover any mesh that fits in memory.
-        let mut stack = [0u32; 96];
+        // Nodes to visit with their box distance, computed once when pushed; a node at least
+        // as far as `best` cannot hold a nearer triangle (`best` only shrinks), so it is not
+        // pushed. The median split halves every node, so the depth is below 32 for any u32
+        // triangle count, and the stack holds at most one entry per level plus one: 64 cover
+        // every tree (and it is set up on every query that gets this far).
+        let mut stack = [(0u32, T::ZERO); 64];
+        stack[0] = (0, box_distance2(&self.nodes[0], p));
         let mut top = 1usize;
         while top > 0 {
             top -= 1;
-            let index = stack[top];
-            let n = &self.nodes[index as usize];
-            if index == skip || box_distance2(n, p) >= best.0 {
+            let (index, distance) = stack[top];
+            if index == skip || distance >= best.0 {
                 continue;
             }
+            let n = &self.nodes[index as usize];
             if n.count > 0 {
-                if self.leaf(tris, index, p, enough2, &mut best) {
+                if self.leaf(tris, index, p, enough2, usize::MAX, &mut best) {
                     return best;
                 }
             } else if top + 2 <= stack.len() {
                 let (a, b) = (n.start, n.start + 1);
-                let (near, far) =
-                    if box_distance2(&self.nodes[a as usize], p) <= box_distance2(&self.nodes[b as usize], p) {
-                        (a, b)
-                    } else {
-                        (b, a)
-                    };
-                stack[top] = far;
-                stack[top + 1] = near;
-                top += 2;
+                let pair = &self.nodes[a as usize..a as usize + 2]; // one bounds check for both
+                let (da, db) = (box_distance2(&pair[0], p), box_distance2(&pair[1], p));
+                let (near, far) = if da <= db { ((a, da), (b, db)) } else { ((b, db), (a, da)) };
+                // Far first, so that near is visited first.
+                for (child, d) in [far, near] {
+                    if d < best.0 {
+                        stack[top] = (child, d);
+                        top += 1;
+                    }
+                }
             }
         }
         best
     }
 
-    /// Tests the triangles of leaf `index` against `best` (squared distance, triangle); true
-    /// once one is within `enough2`.
-    fn leaf(&self, tris: &[Triangle<T>], index: u32, p: [T; 3], enough2: T, best: &mut (T, usize)) -> bool {
+    /// Tests the triangles of leaf `index` but `done` against `best` (squared distance,
+    /// triangle); true once one is within `enough2`.
+    #[inline]
+    fn leaf(
+        &self,
+        tris: &[Triangle<T>],
+        index: u32,
+        p: [T; 3],
+        enough2: T,
+        done: usize,
+        best: &mut (T, usize),
+    ) -> bool {
         let n = &self.nodes[index as usize];
         for &t in &self.order[n.start as usize..(n.start + n.count) as usize] {
+            if t as usize == done {
+                continue;
+            }
             let d = point_triangle_distance2(p, &tris[t as usize]);
             if d < best.0 {
                 *best = (d, t as usize);
@@ -206,9 +231,22 @@ impl<T: Real> Bvh<T> {
     }
 }
 
+/// The bounding box of triangle `t`.
+fn triangle_box<T: Real>(t: &Triangle<T>) -> ([T; 3], [T; 3]) {
+    let lo = [0, 1, 2].map(|k| t[0][k].min(t[1][k]).min(t[2][k]));
+    let hi = [0, 1, 2].map(|k| t[0][k].max(t[1][k]).max(t[2][k]));
+    (lo, hi)
+}
+
+/// Squared distance from `p` to the box of `n`.
 fn box_distance2<T: Real>(n: &Node<T>, p: [T; 3]) -> T {
-    let d = [0, 1, 2].map(|k| (n.lo[k] - p[k]).max(p[k] - n.hi[k]).max(T::ZERO));
-    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    // A plain comparison, not `max`: this runs on every visited node, and `max`'s NaN rules
+    // cost instructions. On the finite values here it gives the same result (up to the
+    // sign of a zero, which squaring removes).
+    let larger = |a: T, b: T| if a > b { a } else { b };
+    let axis = |k: usize| larger(larger(n.lo[k] - p[k], p[k] - n.hi[k]), T::ZERO);
+    let (x, y, z) = (axis(0), axis(1), axis(2));
+    x * x + y * y + z * z
 }
 
 /// Distance from `p` to triangle `t` (closest point by region, Ericson's "Real-Time Collision
@@ -285,5 +323,37 @@ mod tests {
         let bvh = Bvh::new(&small);
         let (d2, t) = bvh.nearest_squared(&small, [20.2, 0.2, -2.0], 0.0, 90);
         assert!((d2 - 4.0f32).abs() < 1e-5 && t == 20, "{d2} {t}");
+    }
+
+    /// Pseudo-random triangles in a unit cube (a fixed linear congruential sequence).
+    fn scattered(n: usize) -> Vec<Triangle<f32>> {
+        let mut state = 12345u64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|_| {
+                let a = [next(), next(), next()];
+                [a, a.map(|x| x + 0.05 * next()), a.map(|x| x - 0.05 * next())]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn queries_find_the_exact_nearest_or_one_within_enough() {
+        let tris = scattered(500);
+        let bvh = Bvh::new(&tris);
+        for (i, t) in scattered(200).iter().enumerate() {
+            let p = t[1].map(|x| x * 1.2 - 0.1);
+            let exact = tris.iter().map(|t| point_triangle_distance2(p, t)).fold(f32::INFINITY, f32::min);
+            for hint in [usize::MAX, i, 499] {
+                let (d2, t) = bvh.nearest_squared(&tris, p, 0.0, hint);
+                assert!(d2 == exact && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {exact}");
+                let enough2 = exact * 4.0;
+                let (d2, t) = bvh.nearest_squared(&tris, p, enough2, hint);
+                assert!(d2 <= enough2 && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {enough2}");
+            }
+        }
     }
 }

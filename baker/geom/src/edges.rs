@@ -5,13 +5,21 @@ pub fn edge_key(a: u32, b: u32) -> u64 {
     (a.min(b) as u64) << 32 | a.max(b) as u64
 }
 
+/// The edge keys of a triangle list (three per triangle, edge k from corner k), in triangle
+/// order; `position` maps an index to its position id.
+pub fn edge_keys<T: Copy>(triangles: &[T], position: impl Fn(T) -> u32) -> Vec<u64> {
+    let mut keys = Vec::with_capacity(triangles.len());
+    for t in triangles.chunks_exact(3) {
+        let p = [position(t[0]), position(t[1]), position(t[2])];
+        keys.extend_from_slice(&[edge_key(p[0], p[1]), edge_key(p[1], p[2]), edge_key(p[2], p[0])]);
+    }
+    keys
+}
+
 /// The edge keys of a triangle list (three per triangle), sorted so that equal edges are
 /// adjacent; `position` maps an index to its position id.
 pub fn sorted_edge_keys<T: Copy>(triangles: &[T], position: impl Fn(T) -> u32) -> Vec<u64> {
-    let mut keys: Vec<u64> = triangles
-        .chunks_exact(3)
-        .flat_map(|t| (0..3).map(|k| edge_key(position(t[k]), position(t[(k + 1) % 3]))).collect::<Vec<_>>())
-        .collect();
+    let mut keys = edge_keys(triangles, position);
     keys.sort_unstable();
     keys
 }
@@ -27,5 +35,6 @@ mod tests {
         assert_eq!(keys.len(), 6);
         assert_eq!(keys.iter().filter(|&&k| k == edge_key(1, 2)).count(), 2);
         assert!(keys.windows(2).all(|w| w[0] <= w[1]));
+        assert_eq!(edge_keys(&[0u32, 1, 2], |v| v + 1), vec![edge_key(1, 2), edge_key(2, 3), edge_key(3, 1)]);
     }
 }
