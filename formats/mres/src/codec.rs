@@ -286,10 +286,14 @@ pub(crate) fn preamble(bytes: &[u8]) -> Result<(usize, usize), Invalid> {
 
 /// The number of copies among a page's reference flags, each checked to be 0 or 1.
 pub(crate) fn copy_count(flags: &[u8]) -> Result<usize, Invalid> {
-    match flags.iter().find(|&&f| f > 1) {
-        Some(f) => invalid(format!("reference flag {f} is neither 0 nor 1")),
-        None => Ok(flags.iter().map(|&f| f as usize).sum()),
+    // One branch-free pass (the OR of the flags is over 1 iff one is); the offender is looked
+    // for only then.
+    let (any, copies) = flags.iter().fold((0u8, 0usize), |(any, n), &f| (any | f, n + f as usize));
+    if any > 1 {
+        let f = flags.iter().find(|&&f| f > 1).copied().unwrap_or(any);
+        return invalid(format!("reference flag {f} is neither 0 nor 1"));
     }
+    Ok(copies)
 }
 
 /// Follows the copies' targets through a page (FORMAT.md §4.3): each target is coded as the

@@ -387,14 +387,15 @@ impl Sources {
         let n = self.len;
         self.links.clear();
         self.copies = false;
+        if s.copies == 0 {
+            return Ok(n);
+        }
         self.copied[..n].fill(false);
         for (&v, place) in self.vertex[..n].iter().zip(&mut order[vo..]) {
             *place = (vo + v as usize) as u32;
         }
-        if s.copies == 0 {
-            return Ok(n);
-        }
         let flags = &s.references[vo..][..n.min(order.len() - vo)];
+        let mut copies = 0;
         for (i, _) in flags.iter().enumerate().filter(|(_, &f)| f == 1) {
             let j = vo + i;
             let target = targets.follow.follow(targets.coded.next(), j)?;
@@ -405,8 +406,9 @@ impl Sources {
                 [COPIES + i as u16, ZERO, ZERO]
             };
             (self.copied[i], self.copies) = (true, true);
+            copies += 1;
         }
-        Ok(self.copied[..n].iter().filter(|&&c| !c).count())
+        Ok(n - copies)
     }
 
     /// Moves the `stored` residuals read for the stored vertices to their places in decoding
