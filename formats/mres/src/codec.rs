@@ -16,6 +16,13 @@
 //! Vertices are predicted in the order the triangles first use them (the writer also numbers
 //! them so, which helps the index codec): across an edge of an earlier triangle, from a
 //! vertex of the same triangle, or from the previous vertex.
+//!
+//! A vertex equal in every attribute to one decoded before it in the page (a cluster-border
+//! vertex shared with a neighbouring cluster, mostly: about a quarter of a scan's stored
+//! vertices) is a copy: a reference flag and a delta-coded target instead of its residuals.
+//! Flags plus targets coded against the previous copy's target measured smallest of the codings
+//! tried: on a 100 K-triangle scan the references cost 74 KB after zstd, against 90 KB as byte
+//! planes of the distance back, 94 KB as LEB128 of it and 82 KB as flags plus the distance.
 
 use super::*;
 
@@ -331,9 +338,13 @@ impl Targets {
 /// A stream of `planes` byte planes of `count` values read one value at a time (FORMAT.md
 /// §4.3, byte planes).
 pub(crate) struct PlaneReader<'a> {
+    /// The planes, one after the other.
     pub bytes: &'a [u8],
+    /// How many planes.
     pub planes: usize,
+    /// Values per plane.
     pub count: usize,
+    /// The next value's index.
     pub at: usize,
 }
 
