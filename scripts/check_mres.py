@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent checker for `.mres` files (format version 3).
+"""Independent checker for `.mres` files (format version 4).
 
 Written from docs/FORMAT.md alone, as a second implementation next to the Rust
 reader/validator: it reads every section with numpy, verifies checksums,
@@ -43,7 +43,7 @@ except ImportError as exc:  # pragma: no cover - environment problem
 # ---------------------------------------------------------------------------
 
 MAGIC = b"MRES"
-VERSION = 3
+VERSION = 4
 HEADER_SIZE = 160
 GROUP_SIZE = 40
 CLUSTER_SIZE = 16
@@ -214,7 +214,7 @@ class PageError(Exception):
 def max_encoded_len(flags, vcs, tcs):
     """E_max of section 4.3 for a page of clusters with these counts."""
     n, V, T = len(vcs), int(sum(vcs)), int(sum(tcs))
-    return (4 + 2 * n + 17 * n + 8 * T + T + 12 * V + (4 * V if flags & FLAG_NORMALS else 0)
+    return (4 + 2 * n + 17 * n + 8 * T + T + V + 12 * V + (4 * V if flags & FLAG_NORMALS else 0)
             + (4 * V if flags & FLAG_UVS else 0) + (2 * T if flags & FLAG_MATERIALS else 0))
 
 
@@ -263,22 +263,6 @@ def decoding_order(tri, vc):
     return out
 
 
-def rebuild(order, residuals, lanes, anchor, wrap):
-    """Values of one attribute from its residuals (lanes per vertex)."""
-    values = [None] * len(order)
-    for j, (v, pred) in enumerate(order):
-        r = residuals[lanes * j:lanes * j + lanes]
-        if pred[0] == "par":
-            a, b, d = values[pred[1]], values[pred[2]], values[pred[3]]
-            p = [a[k] + b[k] - d[k] for k in range(lanes)]
-        elif pred[0] == "vtx":
-            p = values[pred[1]]
-        else:
-            p = anchor
-        values[v] = [wrap(p[k] + r[k]) for k in range(lanes)]
-    return values
-
-
 def wrap32(x):
     return ((x + (1 << 31)) & 0xFFFFFFFF) - (1 << 31)
 
@@ -294,40 +278,55 @@ def decode_encoded_page(enc, vcs, tcs, flags):
     n, V, T = len(vcs), int(sum(vcs)), int(sum(tcs))
     if len(enc) < 4 + 2 * n:
         raise PageError(f"{len(enc)} encoded bytes, shorter than the preamble and index lengths")
-    P = enc[0]
-    if not 1 <= P <= 4 or any(enc[1:4]):
-        raise PageError(f"preamble {enc[0:4].hex()}: plane count outside 1..=4 or reserved bytes not zero")
+    P, R = enc[0], enc[1]
+    if not 1 <= P <= 4 or R > 4 or any(enc[2:4]):
+        raise PageError(f"preamble {enc[0:4].hex()}: position planes outside 1..=4, target planes over 4 "
+                        "or reserved bytes not zero")
     lengths = struct.unpack_from(f"<{n}H", enc, 4)
     for i, (L, t) in enumerate(zip(lengths, tcs)):
         if L > 17 + 8 * t:
             raise PageError(f"cluster {i} of the page: {L} bytes of coded indices for {t} triangles "
                             f"(at most {17 + 8 * t})")
     has_n, has_u, has_m = bool(flags & FLAG_NORMALS), bool(flags & FLAG_UVS), bool(flags & FLAG_MATERIALS)
-    expect = 4 + 2 * n + sum(lengths) + T + 3 * P * V + 4 * V * has_n + 4 * V * has_u + 2 * T * has_m
-    if len(enc) != expect:
-        raise PageError(f"{len(enc)} encoded bytes, the counts, index lengths and {P} planes need {expect}")
     at = 4 + 2 * n
     coded_at = at
     at += sum(lengths)
     marks = list(enc[at:at + T])
     at += T
+    refs = list(enc[at:at + V])
+    if len(refs) < V:
+        raise PageError(f"{len(enc)} encoded bytes end before the reference flags")
+    at += V
+    bad = [f for f in refs if f > 1]
+    if bad:
+        raise PageError(f"reference flag {bad[0]} is neither 0 nor 1")
+    Cp = sum(refs)
+    S = V - Cp
+    expect = (4 + 2 * n + sum(lengths) + T + V + R * Cp + 3 * P * S + 4 * S * has_n + 4 * S * has_u
+              + 2 * T * has_m)
+    if len(enc) != expect:
+        raise PageError(f"{len(enc)} encoded bytes, the counts, index lengths, {P} planes and {Cp} copies "
+                        f"with {R} target planes need {expect}")
     bad = [m for m in marks if m > 7]
     if bad:
         raise PageError(f"open-edge mark {bad[0]} has bits above bit 2")
-    pos = [unzigzag(z, 32) for z in planes(enc, at, 3 * V, P)]
-    at += 3 * P * V
+    targets = [unzigzag(z, 32) for z in planes(enc, at, Cp, R)]
+    at += R * Cp
+    pos = [unzigzag(z, 32) for z in planes(enc, at, 3 * S, P)]
+    at += 3 * P * S
     nrm = uvs = mat = None
     if has_n:
-        nrm = [unzigzag(z, 16) for z in planes(enc, at, 2 * V, 2)]
-        at += 4 * V
+        nrm = [unzigzag(z, 16) for z in planes(enc, at, 2 * S, 2)]
+        at += 4 * S
     if has_u:
-        uvs = [unzigzag(z, 16) for z in planes(enc, at, 2 * V, 2)]
-        at += 4 * V
+        uvs = [unzigzag(z, 16) for z in planes(enc, at, 2 * S, 2)]
+        at += 4 * S
     if has_m:
         mat = planes(enc, at, T, 2)
     out = []
-    vo = to = 0
-    anchors = [[0, 0, 0], [0, 0], [0, 0]]
+    to = 0
+    page = {"refs": refs, "targets": iter(targets), "next_target": 0, "decoded": [], "stored": 0,
+            "anchor": ([0, 0, 0], [0, 0], [0, 0])}
     for i, (L, vc, tc) in enumerate(zip(lengths, vcs, tcs)):
         vc, tc = int(vc), int(tc)
         coded = bytes(enc[coded_at:coded_at + L])
@@ -342,22 +341,59 @@ def decode_encoded_page(enc, vcs, tcs, flags):
         if any(x >= 256 for x in tri):
             raise PageError(f"cluster {i} of the page: decoded index {max(tri)} does not fit in a u8")
         order = decoding_order(safe, vc)
-        first = order[0][0]
         c = {"indices": tri, "marks": marks[to:to + tc]}
-        c["q"] = rebuild(order, pos[3 * vo:3 * (vo + vc)], 3, anchors[0], wrap32)
-        anchors[0] = c["q"][first]
+        c["q"], nv, uv = rebuild_cluster(order, page, (pos, nrm if has_n else None, uvs if has_u else None))
         if has_n:
-            c["normals"] = rebuild(order, nrm[2 * vo:2 * (vo + vc)], 2, anchors[1], wrap16)
-            anchors[1] = c["normals"][first]
+            c["normals"] = nv
         if has_u:
-            c["uvs"] = rebuild(order, uvs[2 * vo:2 * (vo + vc)], 2, anchors[2], wrap16)
-            anchors[2] = c["uvs"][first]
+            c["uvs"] = uv
         if has_m:
             c["materials"] = mat[to:to + tc]
         out.append(c)
-        vo += vc
         to += tc
     return out
+
+
+def rebuild_cluster(order, page, residuals):
+    """One cluster's values (grid coordinates, octahedral values, UVs; None
+    for an attribute the file lacks) in decoding order (section 4.3): a copy
+    (reference flag 1) takes every attribute of the vertex its target names, a
+    stored vertex is its prediction plus its residuals. `page` carries the
+    page's state from cluster to cluster."""
+    vc = len(order)
+    lanes = (3, 2, 2)
+    wraps = (wrap32, wrap16, wrap16)
+    values = [[None] * vc if res is not None else None for res in residuals]
+    for v, pred in order:
+        j = len(page["decoded"])
+        if page["refs"][j]:
+            t = page["next_target"] + next(page["targets"])
+            if not 0 <= t < j:
+                raise PageError(f"vertex {j} of the page copies vertex {t}, not one decoded before it")
+            page["next_target"] = t + 1
+            for a in range(3):
+                if values[a] is not None:
+                    values[a][v] = list(page["decoded"][t][a])
+        else:
+            k = page["stored"]
+            page["stored"] += 1
+            for a in range(3):
+                if values[a] is None:
+                    continue
+                w = lanes[a]
+                r = residuals[a][w * k:w * k + w]
+                if pred[0] == "par":
+                    x, y, d = values[a][pred[1]], values[a][pred[2]], values[a][pred[3]]
+                    p = [x[m] + y[m] - d[m] for m in range(w)]
+                elif pred[0] == "vtx":
+                    p = values[a][pred[1]]
+                else:
+                    p = page["anchor"][a]
+                values[a][v] = [wraps[a](p[m] + r[m]) for m in range(w)]
+        page["decoded"].append(tuple(values[a][v] if values[a] is not None else None for a in range(3)))
+    first = order[0][0]
+    page["anchor"] = tuple(values[a][first] if values[a] is not None else None for a in range(3))
+    return values
 
 
 def pack_bits(records, widths):
@@ -493,6 +529,10 @@ class Checker:
         if version == 2:
             r.fatal("bad_version", f"version 2, this checker reads version {VERSION} only (version 2 stored "
                                    "pages in the GPU layout itself; re-bake the mesh with the current baker)")
+        if version == 3:
+            r.fatal("bad_version", f"version 3, this checker reads version {VERSION} only (version 3 stored "
+                                   "every vertex of a page with residuals, without copies of repeated vertices; "
+                                   "re-bake the mesh with the current baker)")
         if version != VERSION:
             r.fatal("bad_version", f"version {version}, this checker reads version {VERSION}")
         if header_size != HEADER_SIZE:

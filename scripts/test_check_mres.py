@@ -137,39 +137,58 @@ def decode_page(data, p):
     cls = [cluster(data, rec["first"] + i) for i in range(rec["count"])]
     enc = page_encoded(data, p)
     n, V, T = len(cls), sum(c["vc"] for c in cls), sum(c["tc"] for c in cls)
-    planes = enc[0]
+    planes, target_planes = enc[0], enc[1]
     lengths = struct.unpack_from(f"<{n}H", enc, 4)
     at = 4 + 2 * n
     coded_at = at
     at += sum(lengths)
     marks = list(enc[at:at + T])
     at += T
-    attrs = {"q": (byte_planes(enc, at, 3 * V, planes), 3, 32)}
-    at += 3 * planes * V
+    copies = list(enc[at:at + V])
+    at += V
+    C = sum(copies)
+    S = V - C
+    targets = iter(byte_planes(enc, at, C, target_planes))
+    at += target_planes * C
+    attrs = {"q": (byte_planes(enc, at, 3 * S, planes), 3, 32)}
+    at += 3 * planes * S
     for name, flag in (("normals", FLAG_NORMALS), ("uvs", FLAG_UVS)):
         if flags & flag:
-            attrs[name] = (byte_planes(enc, at, 2 * V, 2), 2, 16)
-            at += 4 * V
+            attrs[name] = (byte_planes(enc, at, 2 * S, 2), 2, 16)
+            at += 4 * S
     materials = byte_planes(enc, at, T, 2) if flags & FLAG_MATERIALS else None
     anchors = {name: [0] * lanes for name, (_, lanes, _) in attrs.items()}
-    out, vo, to = [], 0, 0
+    out, to, j, k, next_target = [], 0, 0, 0, 0
+    decoded = []  # every vertex of the page in decoding order: {attribute: value}
     for i, (c, L) in enumerate(zip(cls, lengths)):
         tri = [int(x) for x in meshopt.decode_index_buffer(bytes(enc[coded_at:coded_at + L]), 3 * c["tc"], 4)]
         coded_at += L
         order = prediction_order(tri, c["vc"])
         d = {"index": rec["first"] + i, "indices": tri, "marks": marks[to:to + c["tc"]],
              "materials": materials[to:to + c["tc"]] if materials else None, "normals": None, "uvs": None}
-        for name, (res, lanes, bits) in attrs.items():
-            values = [None] * c["vc"]
-            for j, (v, pred) in enumerate(order):
-                r = res[lanes * (vo + j):lanes * (vo + j + 1)]
-                values[v] = [(x + signed(z)) % (1 << bits) for x, z in zip(predicted(values, pred, anchors[name]), r)]
-            anchors[name] = values[order[0][0]]
+        values = {name: [None] * c["vc"] for name in attrs}
+        for v, pred in order:
+            if copies[j]:
+                t = next_target + signed(next(targets))
+                next_target = t + 1
+                for name in attrs:
+                    values[name][v] = decoded[t][name]
+            else:
+                for name, (res, lanes, bits) in attrs.items():
+                    r = res[lanes * k:lanes * (k + 1)]
+                    p_ = predicted(values[name], pred, anchors[name])
+                    values[name][v] = [(x + signed(z)) % (1 << bits) for x, z in zip(p_, r)]
+                k += 1
+            decoded.append({name: values[name][v] for name in attrs})
+            j += 1
+        for name, (_, _, bits) in attrs.items():
+            anchors[name] = values[name][order[0][0]]
+            vals = values[name]
             if bits == 32:
-                values = [[x - (1 << 32) if x >= 1 << 31 else x for x in v] for v in values]
-            d[name] = values
+                vals = [[x - (1 << 32) if x >= 1 << 31 else x for x in v] for v in vals]
+            d[name] = vals
         out.append(d)
-        vo, to = vo + c["vc"], to + c["tc"]
+        to += c["tc"]
     return out
 
 
@@ -206,10 +225,13 @@ def zigzag(r, bits):
 
 
 def encode_page(clusters, flags):
-    """The page's streams (§4.3) and its GPU layout size (§5)."""
+    """The page's streams (§4.3) and its GPU layout size (§5): a vertex equal
+    in every attribute to one decoded before it in the page is a copy of the
+    latest such one."""
     lengths, coded, marks, materials = b"", b"", [], []
     res = {"q": [], "normals": [], "uvs": []}
     anchors = {"q": [0, 0, 0], "normals": [0, 0], "uvs": [0, 0]}
+    latest, copies, targets, next_target = {}, [], [], 0
     for c in clusters:
         c["indices"], c["marks"], code = canonical(c["indices"], c["marks"])
         lengths += struct.pack("<H", len(code))
@@ -219,15 +241,25 @@ def encode_page(clusters, flags):
         # an index past the vertices (a test's corruption) predicts from the last one, as the
         # checker reads it, so that the page decodes and the checker sees the bad index
         order = prediction_order([min(i, len(c["q"]) - 1) for i in c["indices"]], len(c["q"]))
-        for name, bits in (("q", 32), ("normals", 16), ("uvs", 16)):
-            if c[name] is None:
+        names = [(name, bits) for name, bits in (("q", 32), ("normals", 16), ("uvs", 16)) if c[name] is not None]
+        for v, pred in order:
+            key = tuple(tuple(c[name][v]) for name, _ in names)
+            earlier = latest.get(key)
+            latest[key] = len(copies)
+            copies.append(0 if earlier is None else 1)
+            if earlier is not None:
+                targets.append(zigzag(earlier - next_target, 32))
+                next_target = earlier + 1
                 continue
-            values = c[name]
-            for v, pred in order:
+            for name, bits in names:
+                values = c[name]
                 res[name] += [zigzag(x - p, bits) for x, p in zip(values[v], predicted(values, pred, anchors[name]))]
-            anchors[name] = values[order[0][0]]
-    planes = max(1, max((z.bit_length() + 7) // 8 for z in res["q"]))
-    streams = [bytes([planes, 0, 0, 0]), lengths, coded, bytes(marks)]
+        for name, _ in names:
+            anchors[name] = c[name][order[0][0]]
+    planes = max(1, max(((z.bit_length() + 7) // 8 for z in res["q"]), default=1))
+    target_planes = max(((z.bit_length() + 7) // 8 for z in targets), default=0)
+    streams = [bytes([planes, target_planes, 0, 0]), lengths, coded, bytes(marks), bytes(copies)]
+    streams += [bytes((z >> (8 * p)) & 0xFF for z in targets) for p in range(target_planes)]
     streams += [bytes((z >> (8 * p)) & 0xFF for z in res["q"]) for p in range(planes)]
     for name in ("normals", "uvs"):
         if res[name]:
@@ -299,7 +331,7 @@ def baked(tmp_path_factory):
     files = {k: out / f"{k}.mres" for k in ("sphere", "terrain", "boxes")}
     for f in files.values():
         assert f.exists(), f
-        assert struct.unpack_from("<I", f.read_bytes(), 4)[0] == 3, f"{f}: not format version 3 (stale build?)"
+        assert struct.unpack_from("<I", f.read_bytes(), 4)[0] == 4, f"{f}: not format version 4 (stale build?)"
     return d, files
 
 
@@ -737,14 +769,48 @@ def test_mark_over_seven_is_rejected(baked):
     assert "open-edge mark 8" in proc.stdout, proc.stdout
 
 
-@pytest.mark.parametrize("which", ["planes0", "planes5", "reserved"])
+@pytest.mark.parametrize("which", ["planes0", "planes5", "targets5", "reserved"])
 def test_bad_preamble_is_rejected(baked, which):
     def edit(streams):
-        planes = streams[0][0]
-        streams[0] = {"planes0": b"\0\0\0\0", "planes5": b"\5\0\0\0", "reserved": bytes([planes, 0, 1, 0])}[which]
+        planes, targets = streams[0][0], streams[0][1]
+        streams[0] = {"planes0": bytes([0, targets, 0, 0]), "planes5": bytes([5, targets, 0, 0]),
+                      "targets5": bytes([planes, 5, 0, 0]), "reserved": bytes([planes, targets, 1, 0])}[which]
     proc = edit_streams(baked, "sphere", f"preamble-{which}", edit)
     assert_caught(proc, "page_encoding")
     assert "preamble" in proc.stdout, proc.stdout
+
+
+def test_page_zero_has_copies(baked):
+    """The copy tests below need copies in page 0 (cluster borders shared
+    within the page)."""
+    _, files = baked
+    streams, _ = encode_page(decode_page(bytearray(files["sphere"].read_bytes()), 0), 1)
+    assert streams[0][1] >= 1 and sum(streams[4]) > 0
+
+
+@pytest.mark.parametrize("which", ["ahead", "before"])
+def test_bad_copy_target_is_rejected(baked, which):
+    """A copy names a vertex not decoded yet, or one before the page's first:
+    the lengths still match, the target does not."""
+    def edit(streams):
+        first = streams[4].index(1)
+        # the first copy's target is coded against 0: put it at the copy itself, or at -1
+        z = zigzag(first, 32) if which == "ahead" else zigzag(-1, 32)
+        planes = streams[0][1]
+        assert z < 1 << (8 * planes), "the target needs more planes than the page has"
+        for p in range(planes):
+            streams[5 + p] = bytes([(z >> (8 * p)) & 0xFF]) + streams[5 + p][1:]
+    proc = edit_streams(baked, "sphere", f"target-{which}", edit)
+    assert_caught(proc, "page_encoding")
+    assert "copies vertex" in proc.stdout, proc.stdout
+
+
+def test_bad_reference_flag_is_rejected(baked):
+    def edit(streams):
+        streams[4] = bytes([2]) + streams[4][1:]
+    proc = edit_streams(baked, "sphere", "flag2", edit)
+    assert_caught(proc, "page_encoding")
+    assert "reference flag 2" in proc.stdout, proc.stdout
 
 
 def test_short_encoding_is_rejected(baked):
@@ -779,6 +845,15 @@ def test_version_2_is_rejected_with_a_clear_message(baked):
     proc = run_on(baked, "sphere", "v2", mutate)
     assert_caught(proc, "bad_version")
     assert "version 2" in proc.stdout and "re-bake" in proc.stdout, proc.stdout
+
+
+def test_version_3_is_rejected_with_a_clear_message(baked):
+    def mutate(data):
+        data[4] = 3
+        fix_meta_checksum(data)
+    proc = run_on(baked, "sphere", "v3", mutate)
+    assert_caught(proc, "bad_version")
+    assert "version 3" in proc.stdout and "re-bake" in proc.stdout, proc.stdout
 
 
 def test_version_1_is_rejected_with_a_clear_message(baked):

@@ -9,8 +9,8 @@ fn main() {
     let bytes = std::fs::read(&path).expect("a readable file");
     let f = MresFile::parse(bytes.clone()).expect("a valid .mres file");
     let flags = f.header.flags;
-    let names = ["indices", "marks", "positions", "normals", "uvs", "materials"];
-    let mut sizes = [0usize; 6];
+    let names = ["indices", "marks", "references", "targets", "positions", "normals", "uvs", "materials"];
+    let mut sizes = [0usize; 8];
     let mut gpu = 0usize;
     for (p, info) in f.pages.iter().enumerate() {
         gpu += f.page(p as u32).expect("page decodes").len();
@@ -21,12 +21,14 @@ fn main() {
             frames.push(n);
             rest = &rest[n..];
         }
-        // Frames: preamble, index lengths and coded indices, marks, the position planes, then
-        // two planes per attribute the file carries; the position planes are what is left.
+        // Frames: preamble, index lengths and coded indices, marks, references, the target
+        // planes and the position planes (their counts in the preamble), then two planes per
+        // attribute the file carries.
+        let compressed = &bytes[info.offset as usize..][..frames[0]];
+        let preamble = zstd::bulk::decompress(compressed, 4).expect("a preamble frame");
+        let (planes, targets) = (preamble[0] as usize, preamble[1] as usize);
         let attr = |flag: u32| if flags & flag != 0 { 2 } else { 0 };
-        let tail = [attr(FLAG_NORMALS), attr(FLAG_UVS), attr(FLAG_MATERIALS)];
-        let planes = frames.len() - 4 - tail.iter().sum::<usize>();
-        let counts = [3, 1, planes, tail[0], tail[1], tail[2]];
+        let counts = [3, 1, 1, targets, planes, attr(FLAG_NORMALS), attr(FLAG_UVS), attr(FLAG_MATERIALS)];
         let mut at = 0;
         for (size, count) in sizes.iter_mut().zip(counts) {
             *size += frames[at..at + count].iter().sum::<usize>();

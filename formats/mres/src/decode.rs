@@ -7,8 +7,8 @@
 //! The writer decodes every page it writes here and compares the result with the page it laid
 //! out itself, so the two layouts cannot drift apart.
 
-use super::codec::{encoded_len, index_bound, invalid, totals, unzigzag16, unzigzag32, walk};
-use super::codec::{EdgeTable, Invalid, Lanes, Predictor, PREAMBLE};
+use super::codec::{copy_count, encoded_len, index_bound, invalid, preamble, totals, unzigzag16, unzigzag32, walk};
+use super::codec::{EdgeTable, Invalid, Lanes, PlaneReader, Predictor, Shape, Targets, PREAMBLE};
 use super::records::ClusterHeader;
 use super::*;
 use std::cell::RefCell;
@@ -20,6 +20,9 @@ struct Scratch {
     normals: Vec<[u16; 2]>,
     uvs: Vec<[u16; 2]>,
     indices: Vec<u8>,
+    /// Per vertex of the page in decoding order, its place in the page (the references'
+    /// targets).
+    order: Vec<u32>,
     /// One cluster's predictors, then its residuals in decoding order and its values by slot
     /// (see [`Sources::rebuild`]); never cleared, as each cluster writes what it reads.
     sources: Sources,
@@ -30,6 +33,7 @@ struct Scratch {
 /// One attribute of one cluster while it is rebuilt: its residuals in decoding order and its
 /// values by slot.
 struct Residuals<T> {
+    /// In decoding order (a copied vertex's is zero).
     residuals: [T; MAX_CLUSTER_VERTICES],
     values: [T; SLOTS],
 }
@@ -50,9 +54,17 @@ struct Sections<'a> {
     lengths: &'a [u8],
     coded: &'a [u8],
     marks: &'a [u8],
-    /// Position planes, each `3 × vertices` bytes.
+    /// Reference flags, one per vertex in decoding order.
+    references: &'a [u8],
+    /// The copies' coded targets: `target_planes` planes of `copies` bytes.
+    targets: &'a [u8],
+    target_planes: usize,
+    copies: usize,
+    /// Position planes, each `3 × stored` bytes.
     positions: &'a [u8],
     planes: usize,
+    /// Vertices stored with residuals (reference 0).
+    stored: usize,
     normals: &'a [u8],
     uvs: &'a [u8],
     materials: &'a [u8],
@@ -64,28 +76,50 @@ impl<'a> Sections<'a> {
         if bytes.len() < PREAMBLE + 2 * records.len() {
             return invalid("encoded page ends early");
         }
-        let (preamble, rest) = bytes.split_at(PREAMBLE);
-        let planes = preamble[0] as usize;
-        if !(1..=4).contains(&planes) || preamble[1..] != [0, 0, 0] {
-            return invalid("preamble: plane count outside 1..=4 or reserved bytes not zero");
-        }
+        let (head, rest) = bytes.split_at(PREAMBLE);
+        let (planes, target_planes) = preamble(head)?;
         let (lengths, rest) = rest.split_at(2 * records.len());
         let index_bytes: usize = lengths.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]]) as usize).sum();
-        let expected = encoded_len(flags, records.len(), (v, t), index_bytes, planes);
+        // The reference flags say how many vertices carry residuals, so they are read first.
+        let Some(references) = rest.get(index_bytes + t..index_bytes + t + v) else {
+            return invalid("encoded page ends early");
+        };
+        let copies = copy_count(references)?;
+        let stored = v - copies;
+        let expected = encoded_len(flags, records.len(), (v, t), Shape { index_bytes, planes, target_planes, copies });
         if bytes.len() != expected {
-            return invalid(format!("{} encoded bytes, its counts and lengths need {expected}", bytes.len()));
+            return invalid(format!(
+                "{} encoded bytes, its counts, lengths and references need {expected}",
+                bytes.len()
+            ));
         }
         // The total length matches every section below, so none of these splits runs short.
         let with = |flag: u32, n: usize| if flags & flag != 0 { n } else { 0 };
         let (coded, rest) = rest.split_at(index_bytes);
         let (marks, rest) = rest.split_at(t);
-        let (positions, rest) = rest.split_at(planes * 3 * v);
-        let (normals, rest) = rest.split_at(with(FLAG_NORMALS, 4 * v));
-        let (uvs, materials) = rest.split_at(with(FLAG_UVS, 4 * v));
+        let (_, rest) = rest.split_at(v);
+        let (targets, rest) = rest.split_at(target_planes * copies);
+        let (positions, rest) = rest.split_at(planes * 3 * stored);
+        let (normals, rest) = rest.split_at(with(FLAG_NORMALS, 4 * stored));
+        let (uvs, materials) = rest.split_at(with(FLAG_UVS, 4 * stored));
         if let Some(m) = marks.iter().find(|&&m| m > 7) {
             return invalid(format!("open-edge mark {m} has bits above bit 2"));
         }
-        Ok(Sections { lengths, coded, marks, positions, planes, normals, uvs, materials })
+        Ok(Sections {
+            lengths,
+            coded,
+            marks,
+            references,
+            targets,
+            target_planes,
+            copies,
+            positions,
+            planes,
+            stored,
+            normals,
+            uvs,
+            materials,
+        })
     }
 }
 
@@ -108,6 +142,7 @@ pub(crate) fn decode_page_gpu(
             normals: Vec::new(),
             uvs: Vec::new(),
             indices: Vec::new(),
+            order: Vec::new(),
             sources: Sources::default(),
             wide: Residuals::new(),
             pairs: Residuals::new(),
@@ -130,8 +165,13 @@ impl Scratch {
         grow(&mut self.uvs, if uvs { v_total } else { 0 });
         self.indices.clear();
         self.indices.reserve(3 * t_total);
+        grow(&mut self.order, v_total);
         let mut anchors = (<[i32; 3]>::default(), <[u16; 2]>::default(), <[u16; 2]>::default());
-        let (mut vo, mut io) = (0usize, 0usize);
+        let (mut vo, mut so, mut io) = (0usize, 0usize, 0usize);
+        let mut targets = Copies {
+            coded: PlaneReader { bytes: s.targets, planes: s.target_planes, count: s.copies, at: 0 },
+            follow: Targets::new(),
+        };
         let (sources, wide, pairs) = (&mut self.sources, &mut *self.wide, &mut *self.pairs);
         for (r, len) in records.iter().zip(s.lengths.chunks_exact(2)) {
             let (vc, tc) = (r.vertex_count as usize, r.triangle_count as usize);
@@ -139,17 +179,21 @@ impl Scratch {
             let start = self.indices.len();
             decode_indices(&s.coded[io..io + len], vc, tc, &mut self.indices)?;
             sources.walk(&self.indices[start..], vc, &mut self.edges);
-            position_residuals(s, vo, vc, v_total, &mut wide.residuals);
-            anchors.0 = sources.rebuild(wide, vc, anchors.0, &mut self.positions[vo..vo + vc]);
+            let sc = sources.link(s, vo, &mut self.order[..v_total], &mut targets)?;
+            position_residuals(s, so, sc, &mut wide.residuals);
+            sources.spread(&mut wide.residuals, sc);
+            anchors.0 = sources.rebuild(wide, vc, anchors.0, &mut self.positions[..v_total], vo);
             if normals {
-                pair_residuals(s.normals, vo, vc, v_total, &mut pairs.residuals);
-                anchors.1 = sources.rebuild(pairs, vc, anchors.1, &mut self.normals[vo..vo + vc]);
+                pair_residuals(s.normals, so, sc, s.stored, &mut pairs.residuals);
+                sources.spread(&mut pairs.residuals, sc);
+                anchors.1 = sources.rebuild(pairs, vc, anchors.1, &mut self.normals[..v_total], vo);
             }
             if uvs {
-                pair_residuals(s.uvs, vo, vc, v_total, &mut pairs.residuals);
-                anchors.2 = sources.rebuild(pairs, vc, anchors.2, &mut self.uvs[vo..vo + vc]);
+                pair_residuals(s.uvs, so, sc, s.stored, &mut pairs.residuals);
+                sources.spread(&mut pairs.residuals, sc);
+                anchors.2 = sources.rebuild(pairs, vc, anchors.2, &mut self.uvs[..v_total], vo);
             }
-            (vo, io) = (vo + vc, io + len);
+            (vo, so, io) = (vo + vc, so + sc, io + len);
         }
         let max_normal = ((1u32 << normal_bits.min(16)) - 1) as u16;
         if let Some(n) = self.normals[..if normals { v_total } else { 0 }].iter().flatten().find(|&&n| n > max_normal) {
@@ -268,27 +312,51 @@ fn grow<T: Default + Clone>(v: &mut Vec<T>, len: usize) {
     }
 }
 
+/// The copies' targets as the page's clusters read them, in order.
+struct Copies<'a> {
+    coded: PlaneReader<'a>,
+    follow: Targets,
+}
+
 /// Slot of a cluster's anchor (the previous cluster's first vertex) in [`Sources::rebuild`]'s
 /// values, after the 256 vertex slots.
 const ANCHOR: u16 = 256;
 /// Slot of zero, which a one-vertex prediction adds and subtracts.
 const ZERO: u16 = 257;
+/// First of the slots that hold the values of earlier clusters' vertices that this cluster's
+/// vertices copy: `COPIES + i` for the vertex decoded `i`-th.
+const COPIES: u16 = 512;
 /// Value slots: a power of two, so that a slot index masks into range without a check.
-const SLOTS: usize = 512;
+const SLOTS: usize = 1024;
 
 /// A cluster's vertices in decoding order, each with the three value slots its prediction
 /// `a + b − d` reads: a parallelogram reads three decoded vertices, a neighbour `(n, ZERO,
-/// ZERO)`, the anchor `(ANCHOR, ZERO, ZERO)`. One branch-free form for every predictor, so that
-/// each attribute is rebuilt in one tight loop.
+/// ZERO)`, the anchor `(ANCHOR, ZERO, ZERO)`, and a vertex that copies an earlier one
+/// (FORMAT.md §4.3, references) `(n, ZERO, ZERO)` or `(COPIES + i, ZERO, ZERO)` with a zero
+/// residual. One branch-free form for every vertex, so that each attribute is rebuilt in one
+/// tight loop.
 struct Sources {
     vertex: [u8; MAX_CLUSTER_VERTICES],
     slots: [[u16; 3]; MAX_CLUSTER_VERTICES],
+    /// Per vertex in decoding order: it copies an earlier vertex (no residuals stored).
+    copied: [bool; MAX_CLUSTER_VERTICES],
+    /// Whether any vertex of the cluster is copied.
+    copies: bool,
+    /// The copied vertices of earlier clusters: (slot, place in the page).
+    links: Vec<(u16, u32)>,
     len: usize,
 }
 
 impl Default for Sources {
     fn default() -> Sources {
-        Sources { vertex: [0; MAX_CLUSTER_VERTICES], slots: [[0; 3]; MAX_CLUSTER_VERTICES], len: 0 }
+        Sources {
+            vertex: [0; MAX_CLUSTER_VERTICES],
+            slots: [[0; 3]; MAX_CLUSTER_VERTICES],
+            copied: [false; MAX_CLUSTER_VERTICES],
+            copies: false,
+            links: Vec::with_capacity(MAX_CLUSTER_VERTICES),
+            len: 0,
+        }
     }
 }
 
@@ -307,32 +375,90 @@ impl Sources {
             }
             self.len += 1;
         });
+        self.len = self.len.min(MAX_CLUSTER_VERTICES);
+    }
+
+    /// Reads the references of the walked cluster, whose vertices start at page vertex `vo`
+    /// (which is also where the cluster starts in decoding order): records each vertex's
+    /// place in `order` (page decoding order → place in the page) and points each copied
+    /// vertex at the slot of the vertex it copies, one of this cluster's or one filled from an
+    /// earlier cluster's. Returns how many of its vertices are stored with residuals.
+    fn link(&mut self, s: &Sections, vo: usize, order: &mut [u32], targets: &mut Copies) -> Result<usize, Invalid> {
+        let n = self.len;
+        self.links.clear();
+        self.copies = false;
+        if s.copies == 0 {
+            return Ok(n);
+        }
+        self.copied[..n].fill(false);
+        for (&v, place) in self.vertex[..n].iter().zip(&mut order[vo..]) {
+            *place = (vo + v as usize) as u32;
+        }
+        let flags = &s.references[vo..][..n.min(order.len() - vo)];
+        let mut copies = 0;
+        for (i, _) in flags.iter().enumerate().filter(|(_, &f)| f == 1) {
+            let j = vo + i;
+            let target = targets.follow.follow(targets.coded.next(), j)?;
+            self.slots[i] = if target >= vo {
+                [self.vertex[target - vo] as u16, ZERO, ZERO]
+            } else {
+                self.links.push((COPIES + i as u16, order[target]));
+                [COPIES + i as u16, ZERO, ZERO]
+            };
+            (self.copied[i], self.copies) = (true, true);
+            copies += 1;
+        }
+        Ok(n - copies)
+    }
+
+    /// Moves the `stored` residuals read for the stored vertices to their places in decoding
+    /// order, zero for the copied ones (in place, from the end: a stored vertex's place is at
+    /// or after its residual's).
+    fn spread<T: Lanes>(&self, residuals: &mut [T; MAX_CLUSTER_VERTICES], stored: usize) {
+        if !self.copies {
+            return;
+        }
+        let mut k = stored;
+        for i in (0..self.len).rev() {
+            if self.copied[i] {
+                residuals[i] = T::default();
+            } else {
+                k = k.saturating_sub(1);
+                residuals[i] = residuals[k];
+            }
+        }
     }
 
     /// Each vertex's value (prediction plus residual, `residuals` in decoding order) into
-    /// `out`, indexed by vertex; returns the first decoded vertex's value, the next
-    /// cluster's anchor. Every slot a prediction reads was written before: the walk predicts
-    /// only from vertices it has visited.
-    fn rebuild<T: Lanes>(&self, r: &mut Residuals<T>, vc: usize, anchor: T, out: &mut [T]) -> T {
+    /// the page's values `page`, the cluster's starting at `vo`; returns the first decoded
+    /// vertex's value, the next cluster's anchor. Every slot a prediction reads was written
+    /// before: the walk predicts only from vertices it has visited, and a copy reads a vertex
+    /// decoded before it.
+    fn rebuild<T: Lanes>(&self, r: &mut Residuals<T>, vc: usize, anchor: T, page: &mut [T], vo: usize) -> T {
+        let (before, here) = page.split_at_mut(vo);
         let values = &mut r.values;
         values[ANCHOR as usize] = anchor;
         values[ZERO as usize] = T::default();
-        let n = self.len.min(vc).min(MAX_CLUSTER_VERTICES);
+        for &(slot, at) in &self.links {
+            values[slot as usize % SLOTS] = before.get(at as usize).copied().unwrap_or_default();
+        }
+        let n = self.len.min(vc);
         for ((&v, s), &r) in self.vertex[..n].iter().zip(&self.slots[..n]).zip(&r.residuals[..n]) {
             let at = |i: u16| values[i as usize % SLOTS];
             values[v as usize] = at(s[0]).add(at(s[1])).sub(at(s[2])).add(r);
         }
-        let len = out.len().min(MAX_CLUSTER_VERTICES);
-        out[..len].copy_from_slice(&values[..len]);
+        let len = vc.min(here.len()).min(MAX_CLUSTER_VERTICES);
+        here[..len].copy_from_slice(&values[..len]);
         values[self.vertex[0] as usize]
     }
 }
 
-/// The position residuals of the cluster whose vertices start at page vertex `vo`, in
-/// decoding order, from the page's byte planes.
-fn position_residuals(s: &Sections, vo: usize, vc: usize, v_total: usize, out: &mut [[i32; 3]]) {
-    let out = &mut out[..vc];
-    let plane = |p: usize| s.positions[p * 3 * v_total + 3 * vo..][..3 * vc].chunks_exact(3);
+/// The position residuals of the `sc` stored vertices of a cluster, the page's stored
+/// vertices from `so` on, from the page's byte planes (in decoding order; [`Sources::spread`]
+/// then puts them in place).
+fn position_residuals(s: &Sections, so: usize, sc: usize, out: &mut [[i32; 3]]) {
+    let out = &mut out[..sc];
+    let plane = |p: usize| s.positions[p * 3 * s.stored + 3 * so..][..3 * sc].chunks_exact(3);
     for (o, b) in out.iter_mut().zip(plane(0)) {
         *o = [b[0] as i32, b[1] as i32, b[2] as i32];
     }
@@ -348,11 +474,11 @@ fn position_residuals(s: &Sections, vo: usize, vc: usize, v_total: usize, out: &
     }
 }
 
-/// The residuals of a two-plane pair section (normals or UVs) for the cluster whose vertices
-/// start at page vertex `vo`, in decoding order.
-fn pair_residuals(planes: &[u8], vo: usize, vc: usize, v_total: usize, out: &mut [[u16; 2]]) {
-    let low = &planes[2 * vo..][..2 * vc];
-    let high = &planes[2 * v_total + 2 * vo..][..2 * vc];
+/// The residuals of a two-plane pair section (normals or UVs) for the `sc` stored vertices of
+/// a cluster, the page's stored vertices (`stored` in all) from `so` on.
+fn pair_residuals(planes: &[u8], so: usize, sc: usize, stored: usize, out: &mut [[u16; 2]]) {
+    let low = &planes[2 * so..][..2 * sc];
+    let high = &planes[2 * stored + 2 * so..][..2 * sc];
     for ((out, l), h) in out.iter_mut().zip(low.chunks_exact(2)).zip(high.chunks_exact(2)) {
         *out = [unzigzag16(u16::from_le_bytes([l[0], h[0]])), unzigzag16(u16::from_le_bytes([l[1], h[1]]))];
     }

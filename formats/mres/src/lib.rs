@@ -78,7 +78,7 @@ pub use write::write_mres;
 /// File magic, the first four bytes.
 pub const MAGIC: [u8; 4] = *b"MRES";
 /// Format version written by this crate; readers reject any other.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 /// Size of the fixed header in bytes.
 pub const HEADER_SIZE: usize = 160;
 /// Size of one group record in the hierarchy section.

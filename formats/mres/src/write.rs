@@ -715,7 +715,7 @@ fn page_dependencies(pages: &[PageSpan], groups: &[Group], clusters: &[ClusterIn
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::codec::tests::{records, sample};
+    use crate::codec::tests::{records, repeating_page, sample, with_first_target};
 
     /// The fast decoder against this reference one and the writer's layout: the same GPU
     /// bytes for a well-formed page, and for every corruption either both refuse it or both
@@ -755,6 +755,26 @@ mod tests {
                 assert!(agree(&bytes[..cut], &records, flags, 10, gpu.len()), "flags {flags}: cut at {cut}");
             }
             assert!(agree(&bytes, &records, flags, 9, gpu.len()));
+        }
+    }
+    /// With copies (FORMAT.md §4.3, references) too: the same bytes, and the same verdict on
+    /// every corrupted byte; a bad target is an error for both, never a panic.
+    #[test]
+    fn the_fast_decoder_agrees_on_copies() {
+        let flags = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS;
+        let (clusters, streams) = repeating_page();
+        let records = records(&clusters);
+        let bytes: Vec<u8> = streams.concat();
+        let gpu = gpu_page(&clusters, flags);
+        assert_eq!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len()), Ok(gpu.clone()));
+        for low_byte in [0xfe, 0xff] {
+            let bad = decode::decode_page_gpu(&with_first_target(&streams, low_byte), &records, flags, 10, gpu.len());
+            assert!(bad.unwrap_err().0.contains("copies vertex"));
+        }
+        for i in 0..bytes.len() {
+            let mut bad = bytes.clone();
+            bad[i] ^= 1 << (i % 8);
+            assert!(agree(&bad, &records, flags, 10, gpu.len()), "byte {i} flipped");
         }
     }
 }

@@ -93,6 +93,13 @@ fn typed_errors() {
     let mut v = bytes.clone();
     v[4] = 2;
     assert_eq!(MresFile::parse(v).unwrap_err(), MresError::WrongVersion { found: 2 });
+    // Version 3 stored every vertex with residuals, without copies (§8): refused too, and the
+    // message says which version the reader reads.
+    let mut v = bytes.clone();
+    v[4] = 3;
+    let error = MresFile::parse(v).unwrap_err();
+    assert_eq!(error, MresError::WrongVersion { found: 3 });
+    assert_eq!(error.to_string(), "unsupported .mres version 3 (this reader reads version 4)");
     let mut v = bytes.clone();
     v[0] = b'X';
     assert_eq!(MresFile::parse(v).unwrap_err(), MresError::BadMagic);
