@@ -2,19 +2,9 @@
 //! reports, concurrent bakers, a killed baker, corrupt cache entries; settings discovery,
 //! stale outputs, skipped files, output checks before any work.
 
+use crate::{run, text, BAKE_ALL, MRES};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-const BAKE_ALL: &str = env!("CARGO_BIN_EXE_bake-all");
-const MRES: &str = env!("CARGO_BIN_EXE_mres");
-
-fn run(bin: &str, args: &[&str]) -> Output {
-    Command::new(bin).args(args).output().expect("run")
-}
-
-fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
+use std::process::Command;
 
 struct Tree {
     _dir: tempfile::TempDir,

@@ -1,18 +1,7 @@
 //! The commands as a user runs them: exit codes, messages that name the file, outputs.
 
+use crate::{run, text, BAKE_ALL, MRES};
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn run(bin: &str, args: &[&str]) -> Output {
-    Command::new(bin).args(args).output().expect("run command")
-}
-
-fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
-
-const BAKE_ALL: &str = env!("CARGO_BIN_EXE_bake-all");
-const MRES: &str = env!("CARGO_BIN_EXE_mres");
 
 /// A tree with two good meshes, one broken one and a non-mesh file.
 fn asset_tree(dir: &Path) {

@@ -4,25 +4,14 @@
 //! `mres export` writes those names, stale scene outputs are found, and a broken scene file is
 //! an error naming it.
 
+use crate::{run, text, BAKE_ALL, MRES};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 #[path = "../../../../formats/import/tests/common/instanced_scene.rs"]
 mod instanced_scene;
 use instanced_scene::scene_json;
 use mres_format::MresFile;
 use mres_import::SceneFile;
-
-const BAKE_ALL: &str = env!("CARGO_BIN_EXE_bake-all");
-const MRES: &str = env!("CARGO_BIN_EXE_mres");
-
-fn run(bin: &str, args: &[&str]) -> Output {
-    Command::new(bin).args(args).output().expect("run")
-}
-
-fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
 
 struct Tree {
     dir: tempfile::TempDir,

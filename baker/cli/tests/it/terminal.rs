@@ -2,13 +2,12 @@
 //! command runs on a pseudo-terminal and its output is replayed through a terminal emulator,
 //! so cursor movements and line clears act as they would for a user.
 
+use crate::{BAKE_ALL, MRES};
 use std::io::Read;
 use std::os::fd::{FromRawFd, OwnedFd};
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-const BAKE_ALL: &str = env!("CARGO_BIN_EXE_bake-all");
-const MRES: &str = env!("CARGO_BIN_EXE_mres");
 const ROWS: u16 = 200;
 const COLS: u16 = 240;
 
