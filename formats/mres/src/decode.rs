@@ -642,16 +642,31 @@ fn pack<const N: usize>(out: &mut [u8], values: impl Iterator<Item = [u32; N]>, 
 }
 
 /// A page's source vertices in source numbering (FORMAT.md §4.3), read from the sources' GPU
-/// layouts: each source cluster's header once, then a vertex's values from its blocks, every
-/// read bounds-checked (a malformed source layout is an error, never a panic).
+/// layouts: each source cluster's header and block ranges once per page, then a vertex's values
+/// from its blocks, every read bounds-checked (a malformed source layout is an error, never a
+/// panic).
 pub(crate) struct SourceVertices<'a> {
     /// Per source cluster: its first source vertex number; the last entry is `U`.
     starts: Vec<usize>,
-    /// Per source cluster: its header and its page's layout.
-    clusters: Vec<(ClusterHeader, &'a [u8], u32)>,
+    clusters: Vec<SourceCluster<'a>>,
     /// The number of source vertices, `U` (from the records, as the format defines it).
     pub total: usize,
-    flags: u32,
+}
+
+/// One cluster of a source page as far copies read it: its header's ranges and its blocks,
+/// each `None` if it does not lie inside the layout (an error only when a far copy reads it).
+struct SourceCluster<'a> {
+    page: u32,
+    /// The file's `NORMALS` and `UVS` flags.
+    with_normals: bool,
+    with_uvs: bool,
+    position_min: [i32; 3],
+    position_bits: [u32; 3],
+    positions: Option<&'a [u8]>,
+    normal_min: [u16; 2],
+    normal_bits: [u32; 2],
+    normals: Option<&'a [u8]>,
+    uvs: Option<&'a [u8]>,
 }
 
 impl<'a> SourceVertices<'a> {
@@ -660,58 +675,87 @@ impl<'a> SourceVertices<'a> {
         let mut clusters = Vec::new();
         for s in sources {
             for r in s.records {
-                let at = r.page_offset as usize;
-                let Some(bytes) = s.layout.get(at..at + CLUSTER_HEADER_SIZE).and_then(|b| b.first_chunk()) else {
-                    return invalid(format!("source page {}: a cluster header lies outside its layout", s.index));
-                };
-                let h = ClusterHeader::decode(bytes);
-                if h.vertex_count != r.vertex_count || h.position_bits.iter().any(|&b| b > 32) {
-                    return invalid(format!("source page {}: a cluster header disagrees with its record", s.index));
-                }
-                clusters.push((h, s.layout, s.index));
+                clusters.push(SourceCluster::new(s, r, flags)?);
                 starts.push(starts[starts.len() - 1] + r.vertex_count as usize);
             }
         }
-        Ok(SourceVertices { total: starts[starts.len() - 1], starts, clusters, flags })
+        Ok(SourceVertices { total: starts[starts.len() - 1], starts, clusters })
     }
 
     /// The values of source vertex `u` (below [`SourceVertices::total`]).
     fn vertex(&self, u: usize) -> Result<VertexKey, Invalid> {
         let c = self.starts.partition_point(|&s| s <= u).saturating_sub(1);
-        let (Some((h, layout, page)), Some(&start)) = (self.clusters.get(c), self.starts.get(c)) else {
-            return invalid(format!("source vertex {u} out of range"));
-        };
-        let v = (u - start) as u64;
-        let outside = || Invalid(format!("source page {page}: a far copy's source vertex lies outside its layout"));
-        let vc = h.vertex_count as u64;
-        let block = |slot: usize, len: u64| {
-            let at = h.block_offsets[slot] as usize;
-            (at != 0).then(|| layout.get(at..at.saturating_add(len as usize))).flatten().ok_or_else(outside)
-        };
-        let fields = |slot: usize, widths: [u32; 3], n: usize| -> Result<[u32; 3], Invalid> {
-            let stride: u64 = widths[..n].iter().map(|&w| w as u64).sum();
-            let bytes = block(slot, (vc * stride).div_ceil(32) * 4)?;
-            let mut at = v * stride;
-            let mut out = [0u32; 3];
-            for k in 0..n {
-                out[k] = bits::read_bits(bytes, at, widths[k]).ok_or_else(outside)?;
-                at += widths[k] as u64;
-            }
-            Ok(out)
-        };
-        let d = fields(ClusterHeader::POSITIONS, h.position_bits.map(u32::from), 3)?;
-        let position: Option<Vec<i32>> =
-            (0..3).map(|k| i32::try_from(h.position_min[k] as i64 + d[k] as i64).ok()).collect();
-        let position = position.ok_or_else(|| Invalid(format!("source page {page}: a position overflows i32")))?;
-        let mut key: VertexKey = ([position[0], position[1], position[2]], [0; 2], [0; 2]);
-        if self.flags & FLAG_NORMALS != 0 {
-            let bits = [h.normal_bits[0] as u32, h.normal_bits[1] as u32, 0];
-            let d = fields(ClusterHeader::NORMALS, bits, 2)?;
-            let n = |k: usize| u16::try_from(h.normal_min[k] as u32 + d[k]).map_err(|_| outside());
-            key.1 = [n(0)?, n(1)?];
+        match (self.clusters.get(c), self.starts.get(c)) {
+            (Some(cluster), Some(&start)) => cluster.vertex(u - start),
+            _ => invalid(format!("source vertex {u} out of range")),
         }
-        if self.flags & FLAG_UVS != 0 {
-            let q = &block(ClusterHeader::UVS, 4 * vc)?[4 * v as usize..][..4];
+    }
+}
+
+impl<'a> SourceCluster<'a> {
+    /// The cluster of record `r` in source page `s`.
+    fn new(s: &SourcePage<'a>, r: &ClusterInfo, flags: u32) -> Result<SourceCluster<'a>, Invalid> {
+        let at = r.page_offset as usize;
+        let Some(bytes) = s.layout.get(at..at.saturating_add(CLUSTER_HEADER_SIZE)).and_then(|b| b.first_chunk()) else {
+            return invalid(format!("source page {}: a cluster header lies outside its layout", s.index));
+        };
+        let h = ClusterHeader::decode(bytes);
+        if h.vertex_count != r.vertex_count
+            || h.position_bits.iter().any(|&b| b > 32)
+            || h.normal_bits.iter().any(|&b| b > 16)
+        {
+            return invalid(format!("source page {}: a cluster header disagrees with its record", s.index));
+        }
+        let vc = h.vertex_count as usize;
+        let block = |slot: usize, len: usize| {
+            let at = h.block_offsets[slot] as usize;
+            (at != 0).then(|| s.layout.get(at..at.saturating_add(len))).flatten()
+        };
+        let words = |bits: usize| (vc * bits).div_ceil(32) * 4;
+        let position_bits = h.position_bits.map(u32::from);
+        let normal_bits = h.normal_bits.map(u32::from);
+        let with = |flag: u32| flags & flag != 0;
+        Ok(SourceCluster {
+            page: s.index,
+            with_normals: with(FLAG_NORMALS),
+            with_uvs: with(FLAG_UVS),
+            position_min: h.position_min,
+            positions: block(ClusterHeader::POSITIONS, words(position_bits.iter().sum::<u32>() as usize)),
+            position_bits,
+            normal_min: h.normal_min,
+            normals: block(ClusterHeader::NORMALS, words((normal_bits[0] + normal_bits[1]) as usize)),
+            normal_bits,
+            uvs: block(ClusterHeader::UVS, 4 * vc),
+        })
+    }
+
+    /// The values of vertex `v` of the cluster (normals and UVs zero where the file has none).
+    fn vertex(&self, v: usize) -> Result<VertexKey, Invalid> {
+        let outside =
+            || Invalid(format!("source page {}: a far copy's source vertex lies outside its layout", self.page));
+        let v = v as u64;
+        let (pb, nb) = (self.position_bits, self.normal_bits);
+        let positions = self.positions.ok_or_else(outside)?;
+        let mut at = v * (pb[0] + pb[1] + pb[2]) as u64;
+        let mut position = [0i32; 3];
+        for k in 0..3 {
+            let d = bits::read_bits(positions, at, pb[k]).ok_or_else(outside)?;
+            at += pb[k] as u64;
+            position[k] = i32::try_from(self.position_min[k] as i64 + d as i64)
+                .map_err(|_| Invalid(format!("source page {}: a position overflows i32", self.page)))?;
+        }
+        let mut key: VertexKey = (position, [0; 2], [0; 2]);
+        if self.with_normals {
+            let normals = self.normals.ok_or_else(outside)?;
+            let mut at = v * (nb[0] + nb[1]) as u64;
+            for k in 0..2 {
+                let d = bits::read_bits(normals, at, nb[k]).ok_or_else(outside)?;
+                at += nb[k] as u64;
+                key.1[k] = u16::try_from(self.normal_min[k] as u32 + d).map_err(|_| outside())?;
+            }
+        }
+        if self.with_uvs {
+            let q = self.uvs.ok_or_else(outside)?.get(4 * v as usize..4 * v as usize + 4).ok_or_else(outside)?;
             key.2 = [u16::from_le_bytes([q[0], q[1]]), u16::from_le_bytes([q[2], q[3]])];
         }
         Ok(key)

@@ -116,8 +116,16 @@ impl MresIndex {
     /// `raw_size` ([`MresError::SourceCount`], [`MresError::SourceLength`] otherwise). A
     /// layout is only read where the page copies a vertex of it, every read bounds-checked.
     pub fn decode_page(&self, p: u32, compressed: &[u8], sources: &[&[u8]]) -> Result<Page, MresError> {
-        let bytes = decompress_page(&self.header, &self.clusters, &self.pages, p, compressed, sources)?;
+        let bytes = self.page_layout(p, compressed, sources)?;
         page_from_layout(&self.header, &self.clusters, page_info(&self.pages, p)?, p, bytes)
+    }
+
+    /// [`MresIndex::decode_page`] up to the GPU layout only ([`Page::bytes`], what a streamer
+    /// uploads and later pages take as a source), without decoding the clusters from it: the
+    /// same checks of the bytes, the sources and the encoding, the layout valid by
+    /// construction (FORMAT.md §7).
+    pub fn page_layout(&self, p: u32, compressed: &[u8], sources: &[&[u8]]) -> Result<Vec<u8>, MresError> {
+        decompress_page(&self.header, &self.clusters, &self.pages, p, compressed, sources)
     }
 
     /// Decodes cluster `index` from its page's decompressed bytes ([`Page::bytes`]).
