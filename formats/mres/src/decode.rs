@@ -748,10 +748,10 @@ impl<'a> SourceCluster<'a> {
         if self.with_normals {
             let normals = self.normals.ok_or_else(outside)?;
             let mut at = v * (nb[0] + nb[1]) as u64;
-            for k in 0..2 {
-                let d = bits::read_bits(normals, at, nb[k]).ok_or_else(outside)?;
-                at += nb[k] as u64;
-                key.1[k] = u16::try_from(self.normal_min[k] as u32 + d).map_err(|_| outside())?;
+            for ((value, &bits), &min) in key.1.iter_mut().zip(&nb).zip(&self.normal_min) {
+                let d = bits::read_bits(normals, at, bits).ok_or_else(outside)?;
+                at += bits as u64;
+                *value = u16::try_from(min as u32 + d).map_err(|_| outside())?;
             }
         }
         if self.with_uvs {
