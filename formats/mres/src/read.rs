@@ -185,6 +185,11 @@ impl MresFile {
         self.bytes.len()
     }
 
+    /// The whole file's bytes, as parsed.
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
     /// Verifies page `p`'s checksum and returns its decompressed bytes (the GPU layout).
     /// Its clusters are checked when decoded ([`MresFile::decode_cluster`]); to check them
     /// all at once, use [`MresFile::decode_page`].
