@@ -6,7 +6,7 @@ use crate::dag::{BuiltCluster, BuiltDag, BuiltGroup, DagOutput, Frame};
 use crate::error::BakeError;
 use crate::settings::BakeSettings;
 use crate::weld::WeldedMesh;
-use mres_format::write::{write_encoded, EncodedCluster};
+use mres_format::write::{write_encoded_with, EncodedCluster, PageCoding};
 use mres_format::{DagCluster, Group, Header, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS};
 use rayon::prelude::*;
 
@@ -14,13 +14,20 @@ use rayon::prelude::*;
 pub struct Encoder {
     normal_bits: u32,
     position_bits: u32,
+    coding: PageCoding,
     clusters: Vec<EncodedCluster>,
 }
 
 impl Encoder {
     /// An encoder for clusters baked with `settings`.
     pub fn new(settings: &BakeSettings) -> Encoder {
-        Encoder { normal_bits: settings.normal_bits, position_bits: settings.position_bits, clusters: Vec::new() }
+        let coding = if settings.independent_pages { PageCoding::Independent } else { PageCoding::FarCopies };
+        Encoder {
+            normal_bits: settings.normal_bits,
+            position_bits: settings.position_bits,
+            coding,
+            clusters: Vec::new(),
+        }
     }
 
     /// Clusters encoded so far.
@@ -70,7 +77,8 @@ impl DagOutput for Encoder {
 pub fn write(dag: BuiltDag<Encoder>, zstd_level: i32) -> Result<Vec<u8>, BakeError> {
     let header = dag.clusters.header(&dag.frame, dag.source_triangles);
     let groups: Vec<Group> = dag.groups.iter().map(group).collect();
-    Ok(write_encoded(&header, &groups, dag.clusters.clusters, zstd_level)?)
+    let coding = dag.clusters.coding;
+    Ok(write_encoded_with(&header, &groups, dag.clusters.clusters, zstd_level, coding)?)
 }
 
 /// A group in the writer's form (its clusters and page are laid out by the writer).

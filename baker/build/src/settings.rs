@@ -51,6 +51,10 @@ pub struct BakeSettings {
     pub keep_normals: bool,
     /// Keep UVs from the source (if it has them).
     pub keep_uvs: bool,
+    /// Write: encode every page to decode alone, without copies of its sources' vertices
+    /// (docs/FORMAT.md §4.3, far copies): larger files, for a reader that decodes pages out
+    /// of file order.
+    pub independent_pages: bool,
 }
 
 impl Default for BakeSettings {
@@ -80,6 +84,9 @@ impl Default for BakeSettings {
             shard_triangles: 2_000_000,
             keep_normals: true,
             keep_uvs: true,
+            // Far copies store about half the vertices of a scan in a byte or two each; a
+            // streamer holds a page's sources anyway (they are its coarser dependencies).
+            independent_pages: false,
         }
     }
 }

@@ -448,6 +448,21 @@ enum MresStatus mres_page_dependencies(const struct MresIndex *index,
                                        size_t *count);
 
 /**
+ * Copies page `page`'s sources (the pages among its dependencies stored before it, ascending;
+ * docs/FORMAT.md §4.3) into `out`, an array of `cap` elements, and stores their number in
+ * `*count`: the pages `mres_page_decode` takes, decoded, as its `sources`. Buffer rules as
+ * for `mres_page_dependencies`.
+ *
+ * # Safety
+ * As for `mres_page_dependencies`.
+ */
+enum MresStatus mres_page_sources(const struct MresIndex *index,
+                                  uint32_t page,
+                                  uint32_t *out,
+                                  size_t cap,
+                                  size_t *count);
+
+/**
  * The clusters of the uniform cut at object-space error `error` (those whose own error is at
  * most `error` and whose parent's is above it; docs/FORMAT.md §6), ascending, into `out`, an
  * array of `cap` elements; their number in `*count`. Buffer rules as for
@@ -483,18 +498,28 @@ enum MresStatus mres_select_view(const struct MresIndex *index,
  * decodes and checks every cluster. On success stores a new page in `*out`; on failure
  * stores null there (when `out` is not null).
  *
+ * `sources` is an array of `source_count` pages decoded before from the same file: the
+ * page's sources (`mres_page_sources`, in that order), whose vertices the page may copy
+ * (docs/FORMAT.md §4.3). Pages are stored coarse to fine and a page's sources come before
+ * it, so a caller decoding in file order has them. Null with `source_count` 0 passes none:
+ * enough for a page that copies nothing from its sources.
+ *
  * Fails with `MRES_ERR_PAGE_LENGTH` when `len` is not the page's compressed size,
  * `MRES_ERR_CHECKSUM` when the bytes are damaged, `MRES_ERR_CORRUPT` when they decode to
- * something inconsistent. The library keeps no pointer into `bytes`.
+ * something inconsistent, `MRES_ERR_ARG` when `sources` are not the page's sources (or are
+ * needed and missing). The library keeps no pointer into `bytes` or `sources`.
  *
  * # Safety
- * `index` must be a live index; `bytes` must point to `len` readable bytes; `out` must be
- * valid for a write.
+ * `index` must be a live index; `bytes` must point to `len` readable bytes; `sources` to
+ * `source_count` live pages (or be null with `source_count` 0); `out` must be valid for a
+ * write.
  */
 enum MresStatus mres_page_decode(const struct MresIndex *index,
                                  uint32_t page,
                                  const uint8_t *bytes,
                                  size_t len,
+                                 const struct MresPage *const *sources,
+                                 size_t source_count,
                                  struct MresPage **out);
 
 /**

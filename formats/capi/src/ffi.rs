@@ -43,6 +43,8 @@ fn status_of(e: &MresError) -> MresStatus {
         MresError::BadMagic => MresStatus::MRES_ERR_BAD_MAGIC,
         MresError::Checksum(_) => MresStatus::MRES_ERR_CHECKSUM,
         MresError::PageLength { .. } => MresStatus::MRES_ERR_PAGE_LENGTH,
+        // The caller passed the wrong pages as a page's sources.
+        MresError::SourceCount { .. } | MresError::SourceLength { .. } => MresStatus::MRES_ERR_ARG,
         // Corrupt, Decompress, and any kind a later reader adds: the data is unusable. (Io
         // cannot occur: the library reads no files.)
         _ => MresStatus::MRES_ERR_CORRUPT,

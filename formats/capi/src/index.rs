@@ -385,6 +385,31 @@ pub unsafe extern "C" fn mres_page_dependencies(
     })
 }
 
+/// Copies page `page`'s sources (the pages among its dependencies stored before it, ascending;
+/// docs/FORMAT.md §4.3) into `out`, an array of `cap` elements, and stores their number in
+/// `*count`: the pages `mres_page_decode` takes, decoded, as its `sources`. Buffer rules as
+/// for `mres_page_dependencies`.
+///
+/// # Safety
+/// As for `mres_page_dependencies`.
+#[no_mangle]
+pub unsafe extern "C" fn mres_page_sources(
+    index: *const MresIndex,
+    page: u32,
+    out: *mut u32,
+    cap: usize,
+    count: *mut usize,
+) -> MresStatus {
+    call("mres_page_sources", || {
+        // SAFETY: the caller's contract, as documented.
+        let index = unsafe { &get(index, "index")?.inner };
+        item(&index.pages, page, "page")?;
+        let sources = index.page_sources(page)?;
+        // SAFETY: as above.
+        unsafe { copy_out(&sources, out, cap, count) }
+    })
+}
+
 /// The clusters of the uniform cut at object-space error `error` (those whose own error is at
 /// most `error` and whose parent's is above it; docs/FORMAT.md §6), ascending, into `out`, an
 /// array of `cap` elements; their number in `*count`. Buffer rules as for

@@ -32,19 +32,29 @@ impl MresPage {
 /// decodes and checks every cluster. On success stores a new page in `*out`; on failure
 /// stores null there (when `out` is not null).
 ///
+/// `sources` is an array of `source_count` pages decoded before from the same file: the
+/// page's sources (`mres_page_sources`, in that order), whose vertices the page may copy
+/// (docs/FORMAT.md §4.3). Pages are stored coarse to fine and a page's sources come before
+/// it, so a caller decoding in file order has them. Null with `source_count` 0 passes none:
+/// enough for a page that copies nothing from its sources.
+///
 /// Fails with `MRES_ERR_PAGE_LENGTH` when `len` is not the page's compressed size,
 /// `MRES_ERR_CHECKSUM` when the bytes are damaged, `MRES_ERR_CORRUPT` when they decode to
-/// something inconsistent. The library keeps no pointer into `bytes`.
+/// something inconsistent, `MRES_ERR_ARG` when `sources` are not the page's sources (or are
+/// needed and missing). The library keeps no pointer into `bytes` or `sources`.
 ///
 /// # Safety
-/// `index` must be a live index; `bytes` must point to `len` readable bytes; `out` must be
-/// valid for a write.
+/// `index` must be a live index; `bytes` must point to `len` readable bytes; `sources` to
+/// `source_count` live pages (or be null with `source_count` 0); `out` must be valid for a
+/// write.
 #[no_mangle]
 pub unsafe extern "C" fn mres_page_decode(
     index: *const MresIndex,
     page: u32,
     bytes: *const u8,
     len: usize,
+    sources: *const *const MresPage,
+    source_count: usize,
     out: *mut *mut MresPage,
 ) -> MresStatus {
     if !out.is_null() {
@@ -58,10 +68,47 @@ pub unsafe extern "C" fn mres_page_decode(
             return Err(Failure::arg("out is null"));
         }
         crate::index::item(&index.pages, page, "page")?;
-        let decoded = MresPage { page: index.decode_page(page, compressed)?, grid: index.header.grid };
+        // SAFETY: the caller's contract, as documented.
+        let layouts = unsafe { source_layouts(index, page, sources, source_count)? };
+        let decoded = MresPage { page: index.decode_page(page, compressed, &layouts)?, grid: index.header.grid };
         // SAFETY: as above; the box is freed by `mres_page_free`.
         unsafe { put(out, "out", Box::into_raw(Box::new(decoded))) }
     })
+}
+
+/// The GPU layouts of the `count` pages at `sources`, each checked to be the page's source of
+/// its place (so that a wrong page is named, not only found too short).
+///
+/// # Safety
+/// As for `mres_page_decode`'s `sources`.
+unsafe fn source_layouts<'a>(
+    index: &mres_format::MresIndex,
+    page: u32,
+    sources: *const *const MresPage,
+    count: usize,
+) -> Result<Vec<&'a [u8]>, Failure> {
+    if count == 0 {
+        return Ok(Vec::new());
+    }
+    if sources.is_null() {
+        return Err(Failure::arg("sources is null"));
+    }
+    // SAFETY: `sources` points to `count` handles (the caller's contract).
+    let handles = unsafe { std::slice::from_raw_parts(sources, count) };
+    let expected = index.page_sources(page)?;
+    let mut out = Vec::with_capacity(count);
+    for (i, &h) in handles.iter().enumerate() {
+        // SAFETY: each handle is a live page or null (the caller's contract).
+        let source = unsafe { get(h, "a source")? };
+        if expected.get(i) != Some(&source.page.index) {
+            return Err(Failure::arg(format!(
+                "source {i} is page {}; page {page}'s sources are {expected:?}",
+                source.page.index
+            )));
+        }
+        out.push(source.page.bytes.as_slice());
+    }
+    Ok(out)
 }
 
 /// Frees a page. Null is allowed (nothing happens). Pointers from `mres_page_bytes` dangle

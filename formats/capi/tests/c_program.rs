@@ -81,6 +81,8 @@ fn expected(bytes: &[u8]) -> BTreeMap<String, String> {
     let vertices: u64 = file.clusters.iter().map(|c| u64::from(c.vertex_count)).sum();
     let gpu_bytes: u64 = file.pages.iter().map(|p| u64::from(p.raw_size)).sum();
     let dependencies: usize = file.pages.iter().map(|p| p.dependencies.len()).sum();
+    let index = mres_format::MresIndex::parse(bytes).expect("parses");
+    let sources: usize = (0..file.pages.len() as u32).map(|p| index.page_sources(p).expect("a page").len()).sum();
     let figures = [
         ("pages", file.pages.len().to_string()),
         ("clusters", file.clusters.len().to_string()),
@@ -88,6 +90,7 @@ fn expected(bytes: &[u8]) -> BTreeMap<String, String> {
         ("vertices", vertices.to_string()),
         ("gpu_bytes", gpu_bytes.to_string()),
         ("dependencies", dependencies.to_string()),
+        ("sources", sources.to_string()),
         ("level0_clusters", uniform_cut(&file.groups, &file.clusters, 0.0).len().to_string()),
         ("root_clusters", uniform_cut(&file.groups, &file.clusters, f32::MAX).len().to_string()),
         // The header is read twice (once alone, once with the prefix), every page once.
@@ -116,7 +119,7 @@ fn c_program_streams_the_file_and_agrees_with_the_rust_reader() {
     let want = expected(&bytes);
     // The file exercises the streaming: several pages, with dependencies between them.
     assert!(want["pages"].parse::<u32>().unwrap() >= 3, "{want:?}");
-    assert!(want["dependencies"] != "0", "{want:?}");
+    assert!(want["dependencies"] != "0" && want["sources"] != "0", "{want:?}");
     assert_eq!(summary(&run(exe, &bytes, "synthetic.mres")), want);
 
     // The sample DAG: one page, every attribute.

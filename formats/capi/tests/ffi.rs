@@ -27,9 +27,22 @@ fn open(prefix: &[u8]) -> Result<*mut MresIndex, MresStatus> {
 }
 
 fn decode(index: *const MresIndex, page: u32, bytes: &[u8]) -> Result<*mut MresPage, MresStatus> {
+    decode_with(index, page, bytes, &[])
+}
+
+/// Decodes page `page` given the pages `sources` (live handles) as its sources.
+fn decode_with(
+    index: *const MresIndex,
+    page: u32,
+    bytes: &[u8],
+    sources: &[*mut MresPage],
+) -> Result<*mut MresPage, MresStatus> {
     let mut out = null_mut();
+    let sources: Vec<*const MresPage> = sources.iter().map(|&s| s as *const MresPage).collect();
     // SAFETY: valid pointers.
-    match unsafe { mres_page_decode(index, page, bytes.as_ptr(), bytes.len(), &mut out) } {
+    match unsafe {
+        mres_page_decode(index, page, bytes.as_ptr(), bytes.len(), sources.as_ptr(), sources.len(), &mut out)
+    } {
         MresStatus::MRES_OK => Ok(out),
         status => {
             assert!(out.is_null());
@@ -41,6 +54,73 @@ fn decode(index: *const MresIndex, page: u32, bytes: &[u8]) -> Result<*mut MresP
 fn page_bytes(file: &[u8], rust: &RustIndex, p: u32) -> Vec<u8> {
     let r = rust.page_range(p).unwrap();
     file[r.start as usize..r.end as usize].to_vec()
+}
+
+/// Page `p`'s sources through the C ABI.
+fn sources_of(index: *const MresIndex, p: u32) -> Vec<u32> {
+    let mut sources = [0u32; 64];
+    let mut n = 0;
+    // SAFETY: valid pointers and lengths.
+    assert_eq!(
+        unsafe { mres_page_sources(index, p, sources.as_mut_ptr(), sources.len(), &mut n) },
+        MresStatus::MRES_OK
+    );
+    sources[..n].to_vec()
+}
+
+/// Every page decoded in file order, each given its sources decoded before it.
+fn decode_in_order(index: *const MresIndex, file: &[u8], rust: &RustIndex) -> Vec<*mut MresPage> {
+    let mut pages: Vec<*mut MresPage> = Vec::new();
+    for p in 0..rust.pages.len() as u32 {
+        let sources: Vec<*mut MresPage> = sources_of(index, p).iter().map(|&s| pages[s as usize]).collect();
+        pages.push(decode_with(index, p, &page_bytes(file, rust, p), &sources).unwrap());
+    }
+    pages
+}
+
+fn free_all(pages: Vec<*mut MresPage>) {
+    for page in pages {
+        // SAFETY: from mres_page_decode, freed once.
+        unsafe { mres_page_free(page) };
+    }
+}
+
+#[test]
+fn pages_take_their_sources() {
+    let file = common::file();
+    let rust = RustIndex::parse(&file).unwrap();
+    let index = open(&file).unwrap();
+    let pages = decode_in_order(index, &file, &rust);
+    let mut needing = 0;
+    for p in 0..rust.pages.len() as u32 {
+        let sources = sources_of(index, p);
+        assert_eq!(sources, rust.page_sources(p).unwrap());
+        let bytes = page_bytes(&file, &rust, p);
+        let handles: Vec<*mut MresPage> = sources.iter().map(|&s| pages[s as usize]).collect();
+        if sources.is_empty() {
+            continue;
+        }
+        // Too many sources, another page in a source's place, or none at all when the page
+        // copies from them: argument errors.
+        let mut more = handles.clone();
+        more.push(handles[0]);
+        assert_eq!(decode_with(index, p, &bytes, &more), Err(MresStatus::MRES_ERR_ARG));
+        let mut wrong = handles.clone();
+        wrong[0] = pages[p as usize];
+        assert_eq!(decode_with(index, p, &bytes, &wrong), Err(MresStatus::MRES_ERR_ARG));
+        assert!(last_error().contains("sources are"), "{}", last_error());
+        match decode(index, p, &bytes) {
+            Ok(page) => free_all(vec![page]),
+            Err(status) => {
+                assert_eq!(status, MresStatus::MRES_ERR_ARG);
+                needing += 1;
+            }
+        }
+    }
+    assert!(needing > 0, "no page of the test file copies from its sources");
+    free_all(pages);
+    // SAFETY: from mres_index_open.
+    unsafe { mres_index_free(index) };
 }
 
 #[test]
@@ -197,7 +277,7 @@ fn buffers_are_checked_and_sized() {
             mres_page_cluster_positions(page, c, positions.as_mut_ptr(), 3 * vertices, &mut n),
             MresStatus::MRES_OK
         );
-        let decoded = rust.decode_page(0, &bytes).unwrap();
+        let decoded = rust.decode_page(0, &bytes, &[]).unwrap();
         assert_eq!(positions, decoded.clusters[0].positions.as_flattened());
         // A cluster of another page is an argument error, naming the page's range.
         let other = rust.pages[1].first_cluster;
@@ -218,10 +298,17 @@ fn pages_decode_from_fetched_bytes_only() {
     let rust = RustIndex::parse(&file).unwrap();
     let prefix_len = RustIndex::prefix_len(&file).unwrap() as usize;
     let index = open(&file[..prefix_len]).unwrap();
+    let mut pages: Vec<*mut MresPage> = Vec::new();
+    let mut layouts: Vec<Vec<u8>> = Vec::new();
     for p in 0..rust.pages.len() as u32 {
         let bytes = page_bytes(&file, &rust, p);
-        let want = rust.decode_page(p, &bytes).unwrap();
-        let page = decode(index, p, &bytes).unwrap();
+        let sources = rust.page_sources(p).unwrap();
+        let source_layouts: Vec<&[u8]> = sources.iter().map(|&s| layouts[s as usize].as_slice()).collect();
+        let want = rust.decode_page(p, &bytes, &source_layouts).unwrap();
+        layouts.push(want.bytes.clone());
+        let handles: Vec<*mut MresPage> = sources.iter().map(|&s| pages[s as usize]).collect();
+        let page = decode_with(index, p, &bytes, &handles).unwrap();
+        pages.push(page);
         // SAFETY: a live page; outputs of the lengths passed.
         unsafe {
             let (mut data, mut len) = (null(), 0usize);
@@ -265,9 +352,9 @@ fn pages_decode_from_fetched_bytes_only() {
                 );
                 assert_eq!(&u16s[..n], &c.materials[..]);
             }
-            mres_page_free(page);
         }
     }
+    free_all(pages);
     // SAFETY: from mres_index_open.
     unsafe { mres_index_free(index) };
 }
@@ -289,15 +376,19 @@ fn damaged_page_bytes_give_their_status() {
     assert_eq!(decode(null(), 1, &bytes), Err(MresStatus::MRES_ERR_ARG));
     // SAFETY: checks the null input with a non-zero length.
     let mut out = null_mut();
-    assert_eq!(unsafe { mres_page_decode(index, 1, null(), bytes.len(), &mut out) }, MresStatus::MRES_ERR_ARG);
+    assert_eq!(
+        unsafe { mres_page_decode(index, 1, null(), bytes.len(), null(), 0, &mut out) },
+        MresStatus::MRES_ERR_ARG
+    );
     // SAFETY: null is allowed.
     unsafe { mres_page_free(null_mut()) };
-    let page = decode(index, 1, &bytes).expect("the undamaged bytes decode");
-    // SAFETY: from mres_page_decode and mres_index_open.
-    unsafe {
-        mres_page_free(page);
-        mres_index_free(index);
-    }
+    let pages = decode_in_order(index, &file, &rust);
+    let sources: Vec<*mut MresPage> = sources_of(index, 1).iter().map(|&s| pages[s as usize]).collect();
+    let page = decode_with(index, 1, &bytes, &sources).expect("the undamaged bytes decode");
+    free_all(pages);
+    free_all(vec![page]);
+    // SAFETY: from mres_index_open.
+    unsafe { mres_index_free(index) };
 }
 
 #[test]
@@ -335,11 +426,16 @@ fn one_index_serves_many_threads() {
     let file = common::file();
     let rust = RustIndex::parse(&file).unwrap();
     let index = open(&file).unwrap() as usize;
+    // The sources, decoded once and read by every thread at once.
+    let pages: Vec<usize> =
+        decode_in_order(index as *const MresIndex, &file, &rust).iter().map(|&p| p as usize).collect();
     std::thread::scope(|s| {
         for p in 0..rust.pages.len() as u32 {
             let bytes = page_bytes(&file, &rust, p);
+            let sources: Vec<usize> = rust.page_sources(p).unwrap().iter().map(|&s| pages[s as usize]).collect();
             s.spawn(move || {
-                let page = decode(index as *const MresIndex, p, &bytes).unwrap();
+                let sources: Vec<*mut MresPage> = sources.iter().map(|&s| s as *mut MresPage).collect();
+                let page = decode_with(index as *const MresIndex, p, &bytes, &sources).unwrap();
                 // SAFETY: from mres_page_decode.
                 unsafe { mres_page_free(page) };
                 // A failure on this thread sets this thread's message only.
@@ -348,6 +444,7 @@ fn one_index_serves_many_threads() {
             });
         }
     });
+    free_all(pages.iter().map(|&p| p as *mut MresPage).collect());
     // SAFETY: every thread is done with it.
     unsafe { mres_index_free(index as *mut MresIndex) };
 }

@@ -42,15 +42,32 @@ fn main() -> Result<(), Box<dyn Error>> {
     println!("{path}: {at} cut: {} clusters", cut.len());
 
     let grid = index.header.grid;
+    // The pages to fetch: those holding the cut, and the sources (docs/FORMAT.md §4.3) of
+    // every page fetched, which come before it; a streamer would not fetch the others.
+    let page_of = |c: u32| index.groups[index.clusters[c as usize].group as usize].page as usize;
+    let mut needed = vec![false; index.pages.len()];
+    for &c in &cut {
+        needed[page_of(c)] = true;
+    }
+    for p in (0..index.pages.len()).rev() {
+        if !needed[p] {
+            continue;
+        }
+        for s in index.page_sources(p as u32).map_err(named)? {
+            needed[s as usize] = true;
+        }
+    }
+    let mut layouts: Vec<Vec<u8>> = vec![Vec::new(); index.pages.len()];
     let mut cut = cut.into_iter().peekable();
     let mut triangles = 0u64;
-    for p in 0..index.pages.len() as u32 {
+    for p in (0..index.pages.len() as u32).filter(|&p| needed[p as usize]) {
         let info = &index.pages[p as usize];
         let in_page = info.first_cluster..info.first_cluster + info.cluster_count;
-        if !cut.peek().is_some_and(|c| in_page.contains(c)) {
-            continue; // a streamer would not fetch this page
-        }
-        let page = index.decode_page(p, &read_range(&mut file, index.page_range(p).map_err(named)?)?).map_err(named)?;
+        let sources = index.page_sources(p).map_err(named)?;
+        let sources: Vec<&[u8]> = sources.iter().map(|&s| layouts[s as usize].as_slice()).collect();
+        let compressed = read_range(&mut file, index.page_range(p).map_err(named)?)?;
+        let page = index.decode_page(p, &compressed, &sources).map_err(named)?;
+        layouts[p as usize] = page.bytes.clone();
         println!("page {p}: {} compressed bytes, {} decompressed", info.compressed_size, page.bytes.len());
         while let Some(c) = cut.next_if(|c| in_page.contains(c)) {
             let cluster = &page.clusters[(c - page.first_cluster) as usize];

@@ -23,6 +23,12 @@
 //! Flags plus targets coded against the previous copy's target measured smallest of the codings
 //! tried: on a 100 K-triangle scan the references cost 74 KB after zstd, against 90 KB as byte
 //! planes of the distance back, 94 KB as LEB128 of it and 82 KB as flags plus the distance.
+//!
+//! A vertex that is not such a copy but equals a vertex of one of the page's **sources** (its
+//! dependencies stored before it: the pages of its clusters' coarser parents, whose vertices
+//! are level-0 vertices that survived simplification) is a **far copy**: flag 2 and a
+//! delta-coded source vertex number (FORMAT.md §4.3). Decoding it reads the source page's GPU
+//! layout, which a streamer holds already; the page's GPU layout does not change.
 
 use super::*;
 
@@ -219,8 +225,8 @@ pub(crate) fn unzigzag16(z: u16) -> u16 {
     ((z >> 1) as i16 ^ -((z & 1) as i16)) as u16
 }
 
-/// Size of the page preamble: the position plane count, the target plane count, then two
-/// zero bytes.
+/// Size of the page preamble: the position plane count, the target plane count, the far
+/// target plane count, then a zero byte.
 pub(crate) const PREAMBLE: usize = 4;
 
 /// Most byte planes of the copies' targets: a coded target fits in a u32.
@@ -242,7 +248,7 @@ pub(crate) fn totals(records: &[ClusterInfo]) -> (usize, usize) {
 
 /// The shape of a page's encoding beyond its records: what the preamble, the index lengths
 /// and the reference stream say (FORMAT.md §4.3).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Shape {
     /// Bytes of coded indices (the sum of the index lengths).
     pub index_bytes: usize,
@@ -250,21 +256,33 @@ pub(crate) struct Shape {
     pub planes: usize,
     /// Byte planes of the copies' targets, `R`.
     pub target_planes: usize,
-    /// Vertices that copy an earlier one (reference flag 1), `C`; the others, `V − C`, are
-    /// stored with residuals.
+    /// Vertices that copy an earlier one (reference flag 1), `C`.
     pub copies: usize,
+    /// Byte planes of the far copies' source vertex numbers, `F`.
+    pub far_planes: usize,
+    /// Vertices that copy a source page's vertex (reference flag 2), `G`; the others,
+    /// `V − C − G`, are stored with residuals.
+    pub far: usize,
+}
+
+impl Shape {
+    /// Vertices stored with residuals, `S = V − C − G`, out of `v`.
+    pub(crate) fn stored(&self, v: usize) -> usize {
+        v.saturating_sub(self.copies + self.far)
+    }
 }
 
 /// Length of a page's encoded bytes of this shape (FORMAT.md §4.3).
 pub(crate) fn encoded_len(flags: u32, clusters: usize, (v, t): (usize, usize), shape: Shape) -> usize {
     let with = |flag: u32, n: usize| if flags & flag != 0 { n } else { 0 };
-    let s = v - shape.copies.min(v);
+    let s = shape.stored(v);
     PREAMBLE
         + 2 * clusters
         + shape.index_bytes
         + t
         + v
         + shape.target_planes * shape.copies
+        + shape.far_planes * shape.far
         + shape.planes * 3 * s
         + with(FLAG_NORMALS, 4 * s)
         + with(FLAG_UVS, 4 * s)
@@ -277,30 +295,35 @@ pub(crate) fn max_encoded_len(flags: u32, records: &[ClusterInfo]) -> usize {
     let index_bytes = records.iter().map(|r| index_bound(r.triangle_count as usize)).sum();
     // Every vertex stored: a copy's target (at most 4 bytes) is shorter than a stored vertex's
     // residuals (12 bytes with 4 planes).
-    let shape = Shape { index_bytes, planes: 4, target_planes: MAX_TARGET_PLANES, copies: 0 };
+    let shape = Shape { index_bytes, planes: 4, ..Shape::default() };
     encoded_len(flags, records.len(), (v, t), shape)
 }
 
-/// Checks a preamble and returns its position and target plane counts.
-pub(crate) fn preamble(bytes: &[u8]) -> Result<(usize, usize), Invalid> {
+/// Checks a preamble and returns its position, target and far target plane counts.
+pub(crate) fn preamble(bytes: &[u8]) -> Result<(usize, usize, usize), Invalid> {
+    let most = MAX_TARGET_PLANES as u8;
     match *bytes {
-        [p, r, 0, 0] if (1..=4).contains(&p) && r as usize <= MAX_TARGET_PLANES => Ok((p as usize, r as usize)),
+        [p, r, f, 0] if (1..=4).contains(&p) && r <= most && f <= most => Ok((p as usize, r as usize, f as usize)),
         _ => invalid(format!(
-            "preamble {bytes:02x?}: position planes outside 1..=4, target planes over 4 or reserved bytes not zero"
+            "preamble {bytes:02x?}: position planes outside 1..=4, target or far target planes over 4 \
+             or reserved byte not zero"
         )),
     }
 }
 
-/// The number of copies among a page's reference flags, each checked to be 0 or 1.
-pub(crate) fn copy_count(flags: &[u8]) -> Result<usize, Invalid> {
-    // One branch-free pass (the OR of the flags is over 1 iff one is); the offender is looked
-    // for only then.
-    let (any, copies) = flags.iter().fold((0u8, 0usize), |(any, n), &f| (any | f, n + f as usize));
-    if any > 1 {
-        let f = flags.iter().find(|&&f| f > 1).copied().unwrap_or(any);
-        return invalid(format!("reference flag {f} is neither 0 nor 1"));
+/// The numbers of copies (flag 1) and far copies (flag 2) among a page's reference flags,
+/// each checked to be 0, 1 or 2.
+pub(crate) fn reference_counts(flags: &[u8]) -> Result<(usize, usize), Invalid> {
+    // One branch-free pass: a flag over 2 has a bit above bit 1 or both low bits set, which
+    // `bad` collects; the offender is looked for only then.
+    let (bad, ones, twos) = flags.iter().fold((0u8, 0usize, 0usize), |(bad, c, g), &f| {
+        (bad | (f >> 2) | (f & (f >> 1)), c + (f & 1) as usize, g + (f >> 1 & 1) as usize)
+    });
+    if bad != 0 {
+        let f = flags.iter().find(|&&f| f > 2).copied().unwrap_or(u8::MAX);
+        return invalid(format!("reference flag {f} is not 0, 1 or 2"));
     }
-    Ok(copies)
+    Ok((ones, twos))
 }
 
 /// Follows the copies' targets through a page (FORMAT.md §4.3): each target is coded as the
@@ -325,6 +348,17 @@ impl Targets {
         }
         self.next = t + 1;
         Ok(t as usize)
+    }
+
+    /// The source vertex of the far copy whose coded difference is `z`; it must be below
+    /// `sources`, the number of the page's source vertices (`U`).
+    pub(crate) fn follow_far(&mut self, z: u32, sources: usize) -> Result<usize, Invalid> {
+        let u = self.next + unzigzag32(z) as i64;
+        if u < 0 || u >= sources as i64 {
+            return invalid(format!("a far copy names source vertex {u}, outside the {sources} of its sources"));
+        }
+        self.next = u + 1;
+        Ok(u as usize)
     }
 
     /// The coded difference of target `t` (the encoder's side of [`Targets::follow`]).
@@ -392,11 +426,52 @@ fn rotate_marks(original: &[u8], marks: &[u8], rotated: &[u32]) -> Option<Vec<u8
 
 /// A vertex's attributes together (normals and UVs zero where the file has none): two
 /// vertices of a page with the same key are exact repeats.
-type VertexKey = ([i32; 3], [u16; 2], [u16; 2]);
+pub(crate) type VertexKey = ([i32; 3], [u16; 2], [u16; 2]);
 
-fn key(c: &Quantized, v: usize) -> VertexKey {
+/// The key of vertex `v` of a cluster.
+pub(crate) fn key(c: &Quantized, v: usize) -> VertexKey {
     let pair = |values: &[[u16; 2]]| values.get(v).copied().unwrap_or_default();
     (c.positions[v], pair(&c.normals), pair(&c.uvs))
+}
+
+/// The keys of a page's source vertices in source numbering (FORMAT.md §4.3): source page by
+/// source page, cluster by cluster, each cluster's vertices by index.
+pub(crate) fn source_keys<'a>(sources: impl IntoIterator<Item = &'a Quantized>) -> Vec<VertexKey> {
+    sources.into_iter().flat_map(|c| (0..c.positions.len()).map(move |v| key(c, v))).collect()
+}
+
+/// A page's source vertices found by key: every (key, source number) pair, sorted, so that
+/// the numbers of equal vertices are one run in ascending order. A sorted array rather than a
+/// hash map of lists: one allocation, and the nearest number is a binary search in the run.
+pub(crate) struct SourceIndex {
+    entries: Vec<(VertexKey, u32)>,
+}
+
+impl SourceIndex {
+    /// The index of source vertices `keys` (in source numbering).
+    pub(crate) fn new(keys: &[VertexKey]) -> SourceIndex {
+        let mut entries: Vec<(VertexKey, u32)> = keys.iter().enumerate().map(|(u, &k)| (k, u as u32)).collect();
+        entries.sort_unstable();
+        SourceIndex { entries }
+    }
+
+    /// The source vertex equal to `k` whose coded difference from `next` (the decoder's
+    /// expectation, the previous far copy's number plus one) is smallest, if any is equal.
+    pub(crate) fn nearest(&self, k: &VertexKey, next: i64) -> Option<usize> {
+        let start = self.entries.partition_point(|(e, _)| e < k);
+        let run = &self.entries[start..];
+        let run = &run[..run.partition_point(|(e, _)| e == k)];
+        // The candidates on either side of `next`; zigzag codes −d one smaller than +d.
+        let at = run.partition_point(|&(_, u)| (u as i64) < next);
+        let cost = |u: u32| zigzag32((u as i64 - next) as i32);
+        [at.checked_sub(1), Some(at)]
+            .into_iter()
+            .flatten()
+            .filter_map(|i| run.get(i))
+            .map(|&(_, u)| u)
+            .min_by_key(|&u| cost(u))
+            .map(|u| u as usize)
+    }
 }
 
 /// Byte planes of `values`, each `N` lanes wide: plane 0 (every lane's low byte), then plane 1,
@@ -416,8 +491,10 @@ fn planes_for<const N: usize>(values: &[[u32; N]], least: usize) -> usize {
 /// zstd frame each so that each gets its own entropy tables; their concatenation is the
 /// encoded page. A vertex equal in every attribute to one decoded before it in the page (a
 /// cluster-border vertex shared with a neighbour, mostly) is stored as a copy of the nearest
-/// such one, without residuals. `None` if the index codec fails.
-pub(crate) fn encode_page(clusters: &[Quantized], flags: u32) -> Option<Vec<Vec<u8>>> {
+/// such one, without residuals; else one equal to a vertex of the page's sources (`sources`,
+/// empty for a page that must decode alone) as a far copy of it. `None` if the index codec
+/// fails.
+pub(crate) fn encode_page(clusters: &[Quantized], flags: u32, sources: &SourceIndex) -> Option<Vec<Vec<u8>>> {
     let mut edges = EdgeTable::new();
     let (mut lengths, mut coded, mut marks) = (Vec::new(), Vec::new(), Vec::new());
     let (mut pos, mut nrm, mut uvs) = (Vec::new(), Vec::new(), Vec::new());
@@ -426,6 +503,7 @@ pub(crate) fn encode_page(clusters: &[Quantized], flags: u32) -> Option<Vec<Vec<
     // Each distinct vertex → its latest place in the page's decoding order.
     let mut latest: std::collections::HashMap<VertexKey, usize> = std::collections::HashMap::new();
     let (mut references, mut targets, mut follow) = (Vec::new(), Vec::new(), Targets::new());
+    let (mut far, mut follow_far) = (Vec::new(), Targets::new());
     for c in clusters {
         let vertex_count = c.positions.len();
         let wide: Vec<u32> = c.indices.iter().map(|&i| i as u32).collect();
@@ -437,10 +515,19 @@ pub(crate) fn encode_page(clusters: &[Quantized], flags: u32) -> Option<Vec<Vec<
         let stored: Vec<(u8, Predictor)> = preds
             .iter()
             .filter(|&&(v, _)| {
-                let earlier = latest.insert(key(c, v as usize), references.len());
-                references.push(earlier.is_some() as u8);
+                let k = key(c, v as usize);
+                let earlier = latest.insert(k, references.len());
+                let source = if earlier.is_none() { sources.nearest(&k, follow_far.next) } else { None };
+                references.push(if earlier.is_some() {
+                    1
+                } else if source.is_some() {
+                    2
+                } else {
+                    0
+                });
                 targets.extend(earlier.map(|t| [follow.code(t)]));
-                earlier.is_none()
+                far.extend(source.map(|u| [follow_far.code(u)]));
+                earlier.is_none() && source.is_none()
             })
             .copied()
             .collect();
@@ -459,8 +546,11 @@ pub(crate) fn encode_page(clusters: &[Quantized], flags: u32) -> Option<Vec<Vec<
     }
     let planes = planes_for(&pos, 1);
     let target_planes = planes_for(&targets, 0);
-    let mut streams = vec![vec![planes as u8, target_planes as u8, 0, 0], lengths, coded, marks, references];
+    let far_planes = planes_for(&far, 0);
+    let preamble = vec![planes as u8, target_planes as u8, far_planes as u8, 0];
+    let mut streams = vec![preamble, lengths, coded, marks, references];
     streams.extend(byte_planes(&targets, target_planes));
+    streams.extend(byte_planes(&far, far_planes));
     streams.extend(byte_planes(&pos, planes));
     for (flag, values) in [(FLAG_NORMALS, &nrm), (FLAG_UVS, &uvs)] {
         if flags & flag != 0 {
@@ -514,28 +604,31 @@ impl<'a> Sections<'a> {
 
 /// The reference decoder, which the tests hold the fast one ([`crate::decode`]) to: decodes
 /// a page's encoded bytes (FORMAT.md §4.3) into its clusters' quantized values;
-/// `records` are the page's cluster records. Every index, reference, octahedral value and
-/// mark is checked against its range; the lengths must match the counts exactly.
+/// `records` are the page's cluster records, `sources` its source vertices in source numbering
+/// (their values as the sources' GPU layouts hold them). Every index, reference, octahedral
+/// value and mark is checked against its range; the lengths must match the counts exactly.
 #[cfg(test)]
 pub(crate) fn decode_page(
     bytes: &[u8],
     records: &[ClusterInfo],
     flags: u32,
     normal_bits: u32,
+    sources: &[VertexKey],
 ) -> Result<Vec<Quantized>, Invalid> {
     let (v_total, t_total) = totals(records);
     let mut s = Sections { rest: bytes };
-    let (planes, target_planes) = preamble(s.take(PREAMBLE)?)?;
+    let (planes, target_planes, far_planes) = preamble(s.take(PREAMBLE)?)?;
     let lengths: Vec<usize> =
         s.take(2 * records.len())?.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]]) as usize).collect();
     let index_bytes: usize = lengths.iter().sum();
     let coded = s.take(index_bytes)?;
     let marks = s.take(t_total)?;
     let references = s.take(v_total)?;
-    let copies = copy_count(references)?;
+    let (copies, far) = reference_counts(references)?;
     let targets: Vec<u32> = s.planes::<1>(copies, target_planes)?.iter().map(|z| z[0]).collect();
-    let stored = v_total - copies;
-    let shape = Shape { index_bytes, planes, target_planes, copies };
+    let far_targets: Vec<u32> = s.planes::<1>(far, far_planes)?.iter().map(|z| z[0]).collect();
+    let shape = Shape { index_bytes, planes, target_planes, copies, far_planes, far };
+    let stored = shape.stored(v_total);
     let expected = encoded_len(flags, records.len(), (v_total, t_total), shape);
     if bytes.len() != expected {
         return invalid(format!("{} encoded bytes, its counts, lengths and references need {expected}", bytes.len()));
@@ -559,6 +652,9 @@ pub(crate) fn decode_page(
         references,
         targets: targets.into_iter(),
         follow: Targets::new(),
+        far_targets: far_targets.into_iter(),
+        follow_far: Targets::new(),
+        sources,
         decoded: Vec::new(),
         next_stored: 0,
         anchor: Default::default(),
@@ -601,6 +697,11 @@ struct Page<'a> {
     /// The copies' coded targets, in order.
     targets: std::vec::IntoIter<u32>,
     follow: Targets,
+    /// The far copies' coded source vertex numbers, in order.
+    far_targets: std::vec::IntoIter<u32>,
+    follow_far: Targets,
+    /// The page's source vertices, in source numbering.
+    sources: &'a [VertexKey],
     /// Every vertex decoded so far, in decoding order.
     decoded: Vec<VertexKey>,
     /// Stored vertices decoded so far (the next one's place in [`Stored`]).
@@ -617,9 +718,13 @@ impl Page<'_> {
     fn cluster(&mut self, preds: &[(u8, Predictor)], stored: &Stored, q: &mut Quantized) -> Result<(), Invalid> {
         for &(v, p) in preds {
             let (v, j) = (v as usize, self.decoded.len());
-            if self.references[j] == 1 {
-                let t = self.follow.follow(self.targets.next().unwrap_or_default(), j)?;
-                let (position, normal, uv) = self.decoded[t];
+            if self.references[j] != 0 {
+                let (position, normal, uv) = if self.references[j] == 1 {
+                    self.decoded[self.follow.follow(self.targets.next().unwrap_or_default(), j)?]
+                } else {
+                    let z = self.far_targets.next().unwrap_or_default();
+                    self.sources[self.follow_far.follow_far(z, self.sources.len())?]
+                };
                 q.positions[v] = position;
                 if let Some(n) = q.normals.get_mut(v) {
                     *n = normal;
@@ -700,20 +805,20 @@ pub(crate) mod tests {
     fn pages_round_trip_exactly() {
         let clusters = vec![sample(3, 5), sample(256, -7), sample(40, 1 << 30)];
         let flags = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS;
-        let bytes: Vec<u8> = encode_page(&clusters, flags).unwrap().concat();
-        assert_eq!(decode_page(&bytes, &records(&clusters), flags, 10), Ok(clusters.clone()));
+        let bytes: Vec<u8> = encode_page(&clusters, flags, &SourceIndex::new(&[])).unwrap().concat();
+        assert_eq!(decode_page(&bytes, &records(&clusters), flags, 10, &[]), Ok(clusters.clone()));
         // A normal above the header's range is refused.
-        assert!(decode_page(&bytes, &records(&clusters), flags, 9).is_err());
+        assert!(decode_page(&bytes, &records(&clusters), flags, 9, &[]).is_err());
         // Without attributes, only positions, indices and marks are stored.
         let bare: Vec<Quantized> = clusters
             .iter()
             .map(|c| Quantized { normals: vec![], uvs: vec![], materials: vec![], ..c.clone() })
             .collect();
-        let bytes: Vec<u8> = encode_page(&bare, 0).unwrap().concat();
-        assert_eq!(decode_page(&bytes, &records(&bare), 0, 0), Ok(bare.clone()));
+        let bytes: Vec<u8> = encode_page(&bare, 0, &SourceIndex::new(&[])).unwrap().concat();
+        assert_eq!(decode_page(&bytes, &records(&bare), 0, 0, &[]), Ok(bare.clone()));
         // One byte more or less is refused.
-        assert!(decode_page(&bytes[..bytes.len() - 1], &records(&bare), 0, 0).is_err());
-        assert!(decode_page(&[&bytes[..], &[0]].concat(), &records(&bare), 0, 0).is_err());
+        assert!(decode_page(&bytes[..bytes.len() - 1], &records(&bare), 0, 0, &[]).is_err());
+        assert!(decode_page(&[&bytes[..], &[0]].concat(), &records(&bare), 0, 0, &[]).is_err());
     }
 
     /// A page whose vertices repeat earlier ones: the third cluster is the first again, every
@@ -739,7 +844,7 @@ pub(crate) mod tests {
     /// The encoded page of [`repeating`] with every attribute, and its copies' count.
     pub(crate) fn repeating_page() -> (Vec<Quantized>, Vec<Vec<u8>>) {
         let clusters = repeating();
-        let streams = encode_page(&clusters, FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS).unwrap();
+        let streams = encode_page(&clusters, FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS, &SourceIndex::new(&[])).unwrap();
         (clusters, streams)
     }
 
@@ -748,7 +853,7 @@ pub(crate) mod tests {
         let flags = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS;
         let (clusters, streams) = repeating_page();
         let bytes: Vec<u8> = streams.concat();
-        assert_eq!(decode_page(&bytes, &records(&clusters), flags, 10), Ok(clusters.clone()));
+        assert_eq!(decode_page(&bytes, &records(&clusters), flags, 10, &[]), Ok(clusters.clone()));
         // Stream 4 holds the reference flags: 14 copies in the second cluster, one within it,
         // and all 40 of the third; the same position with another normal is stored.
         let references = &streams[4];
@@ -756,7 +861,9 @@ pub(crate) mod tests {
         assert_eq!(references.iter().filter(|&&f| f == 1).count(), 14 + 1 + 40);
         // Copies carry no residuals: the page is shorter than the same page stored whole.
         let unique: Vec<Quantized> = (0..3).map(|i| sample([40, 60, 40][i], 100 * i as i32 + 1)).collect();
-        assert!(bytes.len() + 55 * 12 <= encode_page(&unique, flags).unwrap().concat().len() + 140);
+        assert!(
+            bytes.len() + 55 * 12 <= encode_page(&unique, flags, &SourceIndex::new(&[])).unwrap().concat().len() + 140
+        );
     }
 
     /// The encoded bytes of [`repeating_page`] with the first copy's coded target replaced.
@@ -772,7 +879,7 @@ pub(crate) mod tests {
         let flags = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS;
         let (clusters, streams) = repeating_page();
         let records = records(&clusters);
-        let decode = |bytes: &[u8]| decode_page(bytes, &records, flags, 10);
+        let decode = |bytes: &[u8]| decode_page(bytes, &records, flags, 10, &[]);
         // The first copy (vertex 40 of the page) names vertex 127 (not decoded yet), or
         // vertex −128: the lengths still match, the target does not.
         for low_byte in [0xfe, 0xff] {
@@ -782,7 +889,7 @@ pub(crate) mod tests {
         // A flag of 2, and a vertex turned into a copy (one stored vertex's residuals too many).
         let at = streams[..4].iter().map(Vec::len).sum::<usize>();
         let mut bytes = streams.concat();
-        bytes[at] = 2;
+        bytes[at] = 3;
         assert!(decode(&bytes).unwrap_err().0.contains("reference flag"));
         bytes[at] = 1;
         assert!(decode(&bytes).unwrap_err().0.contains("encoded bytes"));

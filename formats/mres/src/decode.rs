@@ -7,8 +7,8 @@
 //! The writer decodes every page it writes here and compares the result with the page it laid
 //! out itself, so the two layouts cannot drift apart.
 
-use super::codec::{copy_count, encoded_len, index_bound, invalid, preamble, totals, unzigzag16, unzigzag32, walk};
-use super::codec::{EdgeTable, Invalid, Lanes, PlaneReader, Predictor, Shape, Targets, PREAMBLE};
+use super::codec::{encoded_len, index_bound, invalid, preamble, reference_counts, totals, unzigzag16, unzigzag32};
+use super::codec::{walk, EdgeTable, Invalid, Lanes, PlaneReader, Predictor, Shape, Targets, VertexKey, PREAMBLE};
 use super::records::ClusterHeader;
 use super::*;
 use std::cell::RefCell;
@@ -60,6 +60,10 @@ struct Sections<'a> {
     targets: &'a [u8],
     target_planes: usize,
     copies: usize,
+    /// The far copies' coded source vertex numbers: `far_planes` planes of `far` bytes.
+    far_targets: &'a [u8],
+    far_planes: usize,
+    far: usize,
     /// Position planes, each `3 × stored` bytes.
     positions: &'a [u8],
     planes: usize,
@@ -77,16 +81,17 @@ impl<'a> Sections<'a> {
             return invalid("encoded page ends early");
         }
         let (head, rest) = bytes.split_at(PREAMBLE);
-        let (planes, target_planes) = preamble(head)?;
+        let (planes, target_planes, far_planes) = preamble(head)?;
         let (lengths, rest) = rest.split_at(2 * records.len());
         let index_bytes: usize = lengths.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]]) as usize).sum();
         // The reference flags say how many vertices carry residuals, so they are read first.
         let Some(references) = rest.get(index_bytes + t..index_bytes + t + v) else {
             return invalid("encoded page ends early");
         };
-        let copies = copy_count(references)?;
-        let stored = v - copies;
-        let expected = encoded_len(flags, records.len(), (v, t), Shape { index_bytes, planes, target_planes, copies });
+        let (copies, far) = reference_counts(references)?;
+        let shape = Shape { index_bytes, planes, target_planes, copies, far_planes, far };
+        let stored = shape.stored(v);
+        let expected = encoded_len(flags, records.len(), (v, t), shape);
         if bytes.len() != expected {
             return invalid(format!(
                 "{} encoded bytes, its counts, lengths and references need {expected}",
@@ -99,6 +104,7 @@ impl<'a> Sections<'a> {
         let (marks, rest) = rest.split_at(t);
         let (_, rest) = rest.split_at(v);
         let (targets, rest) = rest.split_at(target_planes * copies);
+        let (far_targets, rest) = rest.split_at(far_planes * far);
         let (positions, rest) = rest.split_at(planes * 3 * stored);
         let (normals, rest) = rest.split_at(with(FLAG_NORMALS, 4 * stored));
         let (uvs, materials) = rest.split_at(with(FLAG_UVS, 4 * stored));
@@ -113,6 +119,9 @@ impl<'a> Sections<'a> {
             targets,
             target_planes,
             copies,
+            far_targets,
+            far_planes,
+            far,
             positions,
             planes,
             stored,
@@ -123,16 +132,34 @@ impl<'a> Sections<'a> {
     }
 }
 
+/// The error of a page with far copies decoded without its sources.
+pub(crate) const NEEDS_SOURCES: &str = "the page copies vertices of its sources, whose layouts were not given";
+
+/// A source of the page being decoded (FORMAT.md §4.3): a page stored before it that it
+/// depends on, as its decoded GPU layout, which far copies read their values from.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SourcePage<'a> {
+    /// Page index (for messages).
+    pub index: u32,
+    /// Its GPU layout (§5), as given: every read from it is bounds-checked.
+    pub layout: &'a [u8],
+    /// Its cluster records, in cluster order.
+    pub records: &'a [ClusterInfo],
+}
+
 /// Decodes a page's encoded bytes (FORMAT.md §4.3) to its GPU layout (§5), which must be
-/// exactly `raw_size` bytes; `records` are the page's cluster records. Every index,
-/// octahedral value and mark is checked against its range, the section lengths against the
-/// counts; nothing is allocated beyond the page's counts and `raw_size`.
+/// exactly `raw_size` bytes; `records` are the page's cluster records and `sources` its
+/// sources in order, or `None` if the caller has none to give: a page without far copies
+/// decodes alone, one with them is then refused with [`NEEDS_SOURCES`]. Every index, octahedral value,
+/// mark and far copy's source vertex is checked against its range, the section lengths
+/// against the counts; nothing is allocated beyond the page's counts and `raw_size`.
 pub(crate) fn decode_page_gpu(
     bytes: &[u8],
     records: &[ClusterInfo],
     flags: u32,
     normal_bits: u32,
     raw_size: usize,
+    sources: Option<&[SourcePage]>,
 ) -> Result<Vec<u8>, Invalid> {
     SCRATCH.with(|cell| {
         let mut cell = cell.borrow_mut();
@@ -148,7 +175,12 @@ pub(crate) fn decode_page_gpu(
             pairs: Residuals::new(),
         });
         let s = Sections::split(bytes, records, flags)?;
-        scratch.rebuild(&s, records, flags, normal_bits)?;
+        let far = match (s.far, sources) {
+            (0, _) => None,
+            (_, Some(sources)) => Some(SourceVertices::new(sources, flags)?),
+            (_, None) => return invalid(NEEDS_SOURCES),
+        };
+        scratch.rebuild(&s, records, flags, normal_bits, far.as_ref())?;
         scratch.lay_out(&s, records, flags, raw_size)
     })
 }
@@ -156,7 +188,14 @@ pub(crate) fn decode_page_gpu(
 impl Scratch {
     /// Every vertex's values and every cluster's indices, page-wide and in cluster order
     /// (vertices at their local index within their cluster's range).
-    fn rebuild(&mut self, s: &Sections, records: &[ClusterInfo], flags: u32, normal_bits: u32) -> Result<(), Invalid> {
+    fn rebuild(
+        &mut self,
+        s: &Sections,
+        records: &[ClusterInfo],
+        flags: u32,
+        normal_bits: u32,
+        far: Option<&SourceVertices>,
+    ) -> Result<(), Invalid> {
         let (v_total, t_total) = totals(records);
         let (normals, uvs) = (flags & FLAG_NORMALS != 0, flags & FLAG_UVS != 0);
         // Every vertex is written before it is read (see `Sources`), so only growth zeroes.
@@ -171,6 +210,9 @@ impl Scratch {
         let mut targets = Copies {
             coded: PlaneReader { bytes: s.targets, planes: s.target_planes, count: s.copies, at: 0 },
             follow: Targets::new(),
+            far_coded: PlaneReader { bytes: s.far_targets, planes: s.far_planes, count: s.far, at: 0 },
+            follow_far: Targets::new(),
+            sources: far,
         };
         let (sources, wide, pairs) = (&mut self.sources, &mut *self.wide, &mut *self.pairs);
         for (r, len) in records.iter().zip(s.lengths.chunks_exact(2)) {
@@ -182,16 +224,19 @@ impl Scratch {
             let sc = sources.link(s, vo, &mut self.order[..v_total], &mut targets)?;
             position_residuals(s, so, sc, &mut wide.residuals);
             sources.spread(&mut wide.residuals, sc);
-            anchors.0 = sources.rebuild(wide, vc, anchors.0, &mut self.positions[..v_total], vo);
+            let far = |f: &(u16, VertexKey)| (f.0, f.1 .0);
+            anchors.0 = sources.rebuild(wide, vc, anchors.0, &mut self.positions[..v_total], vo, far);
             if normals {
                 pair_residuals(s.normals, so, sc, s.stored, &mut pairs.residuals);
                 sources.spread(&mut pairs.residuals, sc);
-                anchors.1 = sources.rebuild(pairs, vc, anchors.1, &mut self.normals[..v_total], vo);
+                let far = |f: &(u16, VertexKey)| (f.0, f.1 .1);
+                anchors.1 = sources.rebuild(pairs, vc, anchors.1, &mut self.normals[..v_total], vo, far);
             }
             if uvs {
                 pair_residuals(s.uvs, so, sc, s.stored, &mut pairs.residuals);
                 sources.spread(&mut pairs.residuals, sc);
-                anchors.2 = sources.rebuild(pairs, vc, anchors.2, &mut self.uvs[..v_total], vo);
+                let far = |f: &(u16, VertexKey)| (f.0, f.1 .2);
+                anchors.2 = sources.rebuild(pairs, vc, anchors.2, &mut self.uvs[..v_total], vo, far);
             }
             (vo, so, io) = (vo + vc, so + sc, io + len);
         }
@@ -312,10 +357,15 @@ fn grow<T: Default + Clone>(v: &mut Vec<T>, len: usize) {
     }
 }
 
-/// The copies' targets as the page's clusters read them, in order.
+/// The copies' targets and the far copies' source vertices as the page's clusters read them,
+/// in order.
 struct Copies<'a> {
     coded: PlaneReader<'a>,
     follow: Targets,
+    far_coded: PlaneReader<'a>,
+    follow_far: Targets,
+    /// The page's source vertices (present iff the page has far copies).
+    sources: Option<&'a SourceVertices<'a>>,
 }
 
 /// Slot of a cluster's anchor (the previous cluster's first vertex) in [`Sources::rebuild`]'s
@@ -323,8 +373,8 @@ struct Copies<'a> {
 const ANCHOR: u16 = 256;
 /// Slot of zero, which a one-vertex prediction adds and subtracts.
 const ZERO: u16 = 257;
-/// First of the slots that hold the values of earlier clusters' vertices that this cluster's
-/// vertices copy: `COPIES + i` for the vertex decoded `i`-th.
+/// First of the slots that hold the values of earlier clusters' (or source pages') vertices
+/// that this cluster's vertices copy: `COPIES + i` for the vertex decoded `i`-th.
 const COPIES: u16 = 512;
 /// Value slots: a power of two, so that a slot index masks into range without a check.
 const SLOTS: usize = 1024;
@@ -344,6 +394,8 @@ struct Sources {
     copies: bool,
     /// The copied vertices of earlier clusters: (slot, place in the page).
     links: Vec<(u16, u32)>,
+    /// The far-copied vertices: (slot, their values read from the source layout).
+    far: Vec<(u16, VertexKey)>,
     len: usize,
 }
 
@@ -355,6 +407,7 @@ impl Default for Sources {
             copied: [false; MAX_CLUSTER_VERTICES],
             copies: false,
             links: Vec::with_capacity(MAX_CLUSTER_VERTICES),
+            far: Vec::with_capacity(MAX_CLUSTER_VERTICES),
             len: 0,
         }
     }
@@ -386,8 +439,9 @@ impl Sources {
     fn link(&mut self, s: &Sections, vo: usize, order: &mut [u32], targets: &mut Copies) -> Result<usize, Invalid> {
         let n = self.len;
         self.links.clear();
+        self.far.clear();
         self.copies = false;
-        if s.copies == 0 {
+        if s.copies == 0 && s.far == 0 {
             return Ok(n);
         }
         self.copied[..n].fill(false);
@@ -396,7 +450,16 @@ impl Sources {
         }
         let flags = &s.references[vo..][..n.min(order.len() - vo)];
         let mut copies = 0;
-        for (i, _) in flags.iter().enumerate().filter(|(_, &f)| f == 1) {
+        for (i, &flag) in flags.iter().enumerate().filter(|(_, &f)| f != 0) {
+            (self.copied[i], self.copies) = (true, true);
+            copies += 1;
+            if flag == 2 {
+                let Some(far) = targets.sources else { return invalid("a far copy in a page without far copies") };
+                let u = targets.follow_far.follow_far(targets.far_coded.next(), far.total)?;
+                self.far.push((COPIES + i as u16, far.vertex(u)?));
+                self.slots[i] = [COPIES + i as u16, ZERO, ZERO];
+                continue;
+            }
             let j = vo + i;
             let target = targets.follow.follow(targets.coded.next(), j)?;
             self.slots[i] = if target >= vo {
@@ -405,8 +468,6 @@ impl Sources {
                 self.links.push((COPIES + i as u16, order[target]));
                 [COPIES + i as u16, ZERO, ZERO]
             };
-            (self.copied[i], self.copies) = (true, true);
-            copies += 1;
         }
         Ok(n - copies)
     }
@@ -434,13 +495,25 @@ impl Sources {
     /// vertex's value, the next cluster's anchor. Every slot a prediction reads was written
     /// before: the walk predicts only from vertices it has visited, and a copy reads a vertex
     /// decoded before it.
-    fn rebuild<T: Lanes>(&self, r: &mut Residuals<T>, vc: usize, anchor: T, page: &mut [T], vo: usize) -> T {
+    #[allow(clippy::too_many_arguments)]
+    fn rebuild<T: Lanes>(
+        &self,
+        r: &mut Residuals<T>,
+        vc: usize,
+        anchor: T,
+        page: &mut [T],
+        vo: usize,
+        far: impl Fn(&(u16, VertexKey)) -> (u16, T),
+    ) -> T {
         let (before, here) = page.split_at_mut(vo);
         let values = &mut r.values;
         values[ANCHOR as usize] = anchor;
         values[ZERO as usize] = T::default();
         for &(slot, at) in &self.links {
             values[slot as usize % SLOTS] = before.get(at as usize).copied().unwrap_or_default();
+        }
+        for (slot, value) in self.far.iter().map(far) {
+            values[slot as usize % SLOTS] = value;
         }
         let n = self.len.min(vc);
         for ((&v, s), &r) in self.vertex[..n].iter().zip(&self.slots[..n]).zip(&r.residuals[..n]) {
@@ -565,5 +638,126 @@ fn pack<const N: usize>(out: &mut [u8], values: impl Iterator<Item = [u32; N]>, 
     }
     if fill > 0 {
         flush(acc as u32, &mut at);
+    }
+}
+
+/// A page's source vertices in source numbering (FORMAT.md §4.3), read from the sources' GPU
+/// layouts: each source cluster's header and block ranges once per page, then a vertex's values
+/// from its blocks, every read bounds-checked (a malformed source layout is an error, never a
+/// panic).
+pub(crate) struct SourceVertices<'a> {
+    /// Per source cluster: its first source vertex number; the last entry is `U`.
+    starts: Vec<usize>,
+    clusters: Vec<SourceCluster<'a>>,
+    /// The number of source vertices, `U` (from the records, as the format defines it).
+    pub total: usize,
+}
+
+/// One cluster of a source page as far copies read it: its header's ranges and its blocks,
+/// each `None` if it does not lie inside the layout (an error only when a far copy reads it).
+struct SourceCluster<'a> {
+    page: u32,
+    /// The file's `NORMALS` and `UVS` flags.
+    with_normals: bool,
+    with_uvs: bool,
+    position_min: [i32; 3],
+    position_bits: [u32; 3],
+    positions: Option<&'a [u8]>,
+    normal_min: [u16; 2],
+    normal_bits: [u32; 2],
+    normals: Option<&'a [u8]>,
+    uvs: Option<&'a [u8]>,
+}
+
+impl<'a> SourceVertices<'a> {
+    pub(crate) fn new(sources: &[SourcePage<'a>], flags: u32) -> Result<SourceVertices<'a>, Invalid> {
+        let mut starts = vec![0];
+        let mut clusters = Vec::new();
+        for s in sources {
+            for r in s.records {
+                clusters.push(SourceCluster::new(s, r, flags)?);
+                starts.push(starts[starts.len() - 1] + r.vertex_count as usize);
+            }
+        }
+        Ok(SourceVertices { total: starts[starts.len() - 1], starts, clusters })
+    }
+
+    /// The values of source vertex `u` (below [`SourceVertices::total`]).
+    fn vertex(&self, u: usize) -> Result<VertexKey, Invalid> {
+        let c = self.starts.partition_point(|&s| s <= u).saturating_sub(1);
+        match (self.clusters.get(c), self.starts.get(c)) {
+            (Some(cluster), Some(&start)) => cluster.vertex(u - start),
+            _ => invalid(format!("source vertex {u} out of range")),
+        }
+    }
+}
+
+impl<'a> SourceCluster<'a> {
+    /// The cluster of record `r` in source page `s`.
+    fn new(s: &SourcePage<'a>, r: &ClusterInfo, flags: u32) -> Result<SourceCluster<'a>, Invalid> {
+        let at = r.page_offset as usize;
+        let Some(bytes) = s.layout.get(at..at.saturating_add(CLUSTER_HEADER_SIZE)).and_then(|b| b.first_chunk()) else {
+            return invalid(format!("source page {}: a cluster header lies outside its layout", s.index));
+        };
+        let h = ClusterHeader::decode(bytes);
+        if h.vertex_count != r.vertex_count
+            || h.position_bits.iter().any(|&b| b > 32)
+            || h.normal_bits.iter().any(|&b| b > 16)
+        {
+            return invalid(format!("source page {}: a cluster header disagrees with its record", s.index));
+        }
+        let vc = h.vertex_count as usize;
+        let block = |slot: usize, len: usize| {
+            let at = h.block_offsets[slot] as usize;
+            (at != 0).then(|| s.layout.get(at..at.saturating_add(len))).flatten()
+        };
+        let words = |bits: usize| (vc * bits).div_ceil(32) * 4;
+        let position_bits = h.position_bits.map(u32::from);
+        let normal_bits = h.normal_bits.map(u32::from);
+        let with = |flag: u32| flags & flag != 0;
+        Ok(SourceCluster {
+            page: s.index,
+            with_normals: with(FLAG_NORMALS),
+            with_uvs: with(FLAG_UVS),
+            position_min: h.position_min,
+            positions: block(ClusterHeader::POSITIONS, words(position_bits.iter().sum::<u32>() as usize)),
+            position_bits,
+            normal_min: h.normal_min,
+            normals: block(ClusterHeader::NORMALS, words((normal_bits[0] + normal_bits[1]) as usize)),
+            normal_bits,
+            uvs: block(ClusterHeader::UVS, 4 * vc),
+        })
+    }
+
+    /// The values of vertex `v` of the cluster (normals and UVs zero where the file has none).
+    fn vertex(&self, v: usize) -> Result<VertexKey, Invalid> {
+        let outside =
+            || Invalid(format!("source page {}: a far copy's source vertex lies outside its layout", self.page));
+        let v = v as u64;
+        let (pb, nb) = (self.position_bits, self.normal_bits);
+        let positions = self.positions.ok_or_else(outside)?;
+        let mut at = v * (pb[0] + pb[1] + pb[2]) as u64;
+        let mut position = [0i32; 3];
+        for k in 0..3 {
+            let d = bits::read_bits(positions, at, pb[k]).ok_or_else(outside)?;
+            at += pb[k] as u64;
+            position[k] = i32::try_from(self.position_min[k] as i64 + d as i64)
+                .map_err(|_| Invalid(format!("source page {}: a position overflows i32", self.page)))?;
+        }
+        let mut key: VertexKey = (position, [0; 2], [0; 2]);
+        if self.with_normals {
+            let normals = self.normals.ok_or_else(outside)?;
+            let mut at = v * (nb[0] + nb[1]) as u64;
+            for ((value, &bits), &min) in key.1.iter_mut().zip(&nb).zip(&self.normal_min) {
+                let d = bits::read_bits(normals, at, bits).ok_or_else(outside)?;
+                at += bits as u64;
+                *value = u16::try_from(min as u32 + d).map_err(|_| outside())?;
+            }
+        }
+        if self.with_uvs {
+            let q = self.uvs.ok_or_else(outside)?.get(4 * v as usize..4 * v as usize + 4).ok_or_else(outside)?;
+            key.2 = [u16::from_le_bytes([q[0], q[1]]), u16::from_le_bytes([q[2], q[3]])];
+        }
+        Ok(key)
     }
 }

@@ -47,6 +47,29 @@ pub enum MresError {
         /// `compressed_size` in the page table.
         expected: u32,
     },
+    /// A page was given another number of source layouts than it has sources (FORMAT.md
+    /// §4.3: its dependencies stored before it).
+    #[error("page {page}: {given} source layouts given, the page has {expected} sources")]
+    SourceCount {
+        /// Page index.
+        page: u32,
+        /// Layouts given.
+        given: usize,
+        /// Sources the page table gives it.
+        expected: usize,
+    },
+    /// A source layout given for a page is not as long as the source's `raw_size`.
+    #[error("page {page}: source page {source_page}'s layout has {len} bytes, the page table says {expected}")]
+    SourceLength {
+        /// Page index.
+        page: u32,
+        /// The source page.
+        source_page: u32,
+        /// Bytes given.
+        len: usize,
+        /// The source's `raw_size`.
+        expected: u32,
+    },
     /// A page does not decompress to its declared size.
     #[error("page {page}: {problem}")]
     Decompress {

@@ -73,12 +73,12 @@ pub use page::{DecodedCluster, Page};
 pub use read::{MresError, MresFile, MresIndex};
 pub use records::ClusterHeader;
 pub use select::{uniform_cut, view_cut, ViewParams};
-pub use write::write_mres;
+pub use write::{write_mres, write_mres_with, PageCoding};
 
 /// File magic, the first four bytes.
 pub const MAGIC: [u8; 4] = *b"MRES";
 /// Format version written by this crate; readers reject any other.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 /// Size of the fixed header in bytes.
 pub const HEADER_SIZE: usize = 160;
 /// Size of one group record in the hierarchy section.

@@ -48,16 +48,26 @@ pub struct DecodedCluster {
     pub open_edges: Vec<u8>,
 }
 
+/// Page `p`'s sources (FORMAT.md §4.3): its dependencies stored before it, in order.
+pub(crate) fn sources(info: &PageInfo, p: u32) -> impl Iterator<Item = u32> + '_ {
+    info.dependencies.iter().copied().filter(move |&d| d < p)
+}
+
 /// Checks page `p`'s compressed bytes against its table entry (length, then checksum),
 /// decompresses them to the page's encoded bytes and decodes those (FORMAT.md §4.3) to the GPU
-/// layout (§5), which must be exactly `raw_size` bytes; `clusters` is the whole file's.
+/// layout (§5), which must be exactly `raw_size` bytes; `clusters` and `pages` are the whole
+/// file's, `layouts` the GPU layouts of page `p`'s sources, in order: their count and each
+/// one's length are checked against the page table (none at all: enough for a page without
+/// far copies).
 pub(crate) fn decompress_page(
     header: &Header,
     clusters: &[ClusterInfo],
-    info: &PageInfo,
+    pages: &[PageInfo],
     p: u32,
     compressed: &[u8],
+    layouts: &[&[u8]],
 ) -> Result<Vec<u8>, MresError> {
+    let info = pages.get(p as usize).ok_or_else(|| corrupt(format!("page {p} does not exist")))?;
     if compressed.len() as u64 != info.compressed_size as u64 {
         return Err(MresError::PageLength { page: p, len: compressed.len() as u64, expected: info.compressed_size });
     }
@@ -65,6 +75,7 @@ pub(crate) fn decompress_page(
         return Err(MresError::Checksum(format!("page {p}")));
     }
     let records = page_records(clusters, info, p)?;
+    let sources = source_pages(clusters, pages, p, layouts)?;
     // The counts bound the encoded size before anything is allocated; the capacity bounds the
     // output: zstd fails rather than write more.
     let most = codec::max_encoded_len(header.flags, records);
@@ -83,8 +94,12 @@ pub(crate) fn decompress_page(
         encoded.clear();
         encoded.reserve(most);
         zstd.decompress_to_buffer(compressed, encoded).map_err(|e| problem(e.to_string()))?;
-        decode::decode_page_gpu(encoded, records, header.flags, header.normal_bits, info.raw_size as usize)
-            .map_err(|e| problem(e.0))
+        let raw_size = info.raw_size as usize;
+        decode::decode_page_gpu(encoded, records, header.flags, header.normal_bits, raw_size, sources.as_deref())
+            .map_err(|e| match e.0.as_str() {
+                decode::NEEDS_SOURCES => MresError::SourceCount { page: p, given: 0, expected: sources_of(info, p) },
+                _ => problem(e.0),
+            })
     })
 }
 
@@ -92,6 +107,46 @@ thread_local! {
     /// A zstd context and a buffer for a page's encoded bytes, reused from page to page: a
     /// fresh context per page costs more than decompressing a small page.
     static ZSTD: RefCell<Option<(zstd::bulk::Decompressor<'static>, Vec<u8>)>> = const { RefCell::new(None) };
+}
+
+/// The number of page `p`'s sources.
+fn sources_of(info: &PageInfo, p: u32) -> usize {
+    sources(info, p).count()
+}
+
+/// Page `p`'s sources as the decoder reads them: `layouts`, checked to be one per source and
+/// each as long as its page's `raw_size`, with their pages' cluster records; `None` if none
+/// are given (a page without far copies decodes alone: FORMAT.md §4.3).
+fn source_pages<'a>(
+    clusters: &'a [ClusterInfo],
+    pages: &'a [PageInfo],
+    p: u32,
+    layouts: &[&'a [u8]],
+) -> Result<Option<Vec<decode::SourcePage<'a>>>, MresError> {
+    let info = &pages[p as usize];
+    let expected = sources_of(info, p);
+    if layouts.is_empty() {
+        return Ok(None);
+    }
+    if layouts.len() != expected {
+        return Err(MresError::SourceCount { page: p, given: layouts.len(), expected });
+    }
+    sources(info, p)
+        .zip(layouts)
+        .map(|(s, &layout)| {
+            let source = pages.get(s as usize).ok_or_else(|| corrupt(format!("page {p}: source {s} out of range")))?;
+            if layout.len() != source.raw_size as usize {
+                return Err(MresError::SourceLength {
+                    page: p,
+                    source_page: s,
+                    len: layout.len(),
+                    expected: source.raw_size,
+                });
+            }
+            Ok(decode::SourcePage { index: s, layout, records: page_records(clusters, source, s)? })
+        })
+        .collect::<Result<_, _>>()
+        .map(Some)
 }
 
 /// The records of page `p`'s clusters.
@@ -102,15 +157,15 @@ fn page_records<'a>(clusters: &'a [ClusterInfo], info: &PageInfo, p: u32) -> Res
         .ok_or_else(|| corrupt(format!("page {p}: cluster range out of range")))
 }
 
-/// Decompresses page `p` and decodes every cluster in it; `clusters` is the whole file's.
-pub(crate) fn decode_page(
+/// Decodes every cluster of page `p` from its GPU layout `bytes` (as [`decompress_page`]
+/// gives it); `clusters` is the whole file's.
+pub(crate) fn page_from_layout(
     header: &Header,
     clusters: &[ClusterInfo],
     info: &PageInfo,
     p: u32,
-    compressed: &[u8],
+    bytes: Vec<u8>,
 ) -> Result<Page, MresError> {
-    let bytes = decompress_page(header, clusters, info, p, compressed)?;
     let records = page_records(clusters, info, p)?;
     let mut headers = Vec::with_capacity(records.len());
     let mut decoded = Vec::with_capacity(records.len());

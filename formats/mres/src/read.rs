@@ -6,10 +6,11 @@
 
 pub use super::error::MresError;
 use super::error::{corrupt, section};
-use super::page::{decode_page, decompress_page, read_cluster, Page};
+use super::page::{decompress_page, page_from_layout, read_cluster, sources, Page};
 use super::records::{meta_checksum, ClusterRecord, GroupRecord, HeaderRecord, PageRecord};
 use super::*;
 use std::ops::Range;
+use std::sync::OnceLock;
 
 /// The resident part of a `.mres` file — header, hierarchy and page table — parsed and checked
 /// from a prefix of the file, for a streamer that fetches pages itself.
@@ -18,7 +19,9 @@ use std::ops::Range;
 /// read [`HEADER_SIZE`] bytes and pass them to [`MresIndex::prefix_len`]. (A prefix that is
 /// too short also gives [`MresError::Truncated`], whose `end` is the length needed.) Page `p`
 /// is then the byte range [`MresIndex::page_range`] of the file, and
-/// [`MresIndex::decode_page`] checks and decodes it.
+/// [`MresIndex::decode_page`] checks and decodes it, given the GPU layouts of its sources
+/// ([`MresIndex::page_sources`]: pages stored before it, which a streamer loading in file
+/// order has decoded already).
 ///
 /// ```
 /// # fn main() -> Result<(), mres_format::MresError> {
@@ -31,7 +34,8 @@ use std::ops::Range;
 /// let index = MresIndex::parse(&fetch(0..prefix_len))?;
 /// assert_eq!(index.file_size(), file.len() as u64);
 /// // Pages are stored coarse to fine: page 0 holds the root.
-/// let page = index.decode_page(0, &fetch(index.page_range(0)?))?;
+/// assert!(index.page_sources(0)?.is_empty());
+/// let page = index.decode_page(0, &fetch(index.page_range(0)?), &[])?;
 /// for (i, cluster) in page.clusters.iter().enumerate() {
 ///     let record = &index.clusters[page.first_cluster as usize + i];
 ///     assert_eq!(cluster.indices.len(), 3 * record.triangle_count as usize);
@@ -98,11 +102,30 @@ impl MresIndex {
         Ok(info.offset..info.offset + info.compressed_size as u64)
     }
 
+    /// Page `p`'s sources (FORMAT.md §4.3): the pages among its dependencies stored before it,
+    /// ascending. Their vertices may be copied into page `p`, so decoding it needs their GPU
+    /// layouts ([`MresIndex::decode_page`]).
+    pub fn page_sources(&self, p: u32) -> Result<Vec<u32>, MresError> {
+        Ok(sources(page_info(&self.pages, p)?, p).collect())
+    }
+
     /// Checks `compressed`, the bytes of [`MresIndex::page_range`] the caller fetched, against
     /// page `p`'s table entry (length and checksum), decompresses them and decodes the page's
-    /// clusters, checking each.
-    pub fn decode_page(&self, p: u32, compressed: &[u8]) -> Result<Page, MresError> {
-        decode_page(&self.header, &self.clusters, page_info(&self.pages, p)?, p, compressed)
+    /// clusters, checking each. `sources` are the decoded GPU layouts ([`Page::bytes`]) of
+    /// [`MresIndex::page_sources`], in that order: exactly one per source, each of its
+    /// `raw_size` ([`MresError::SourceCount`], [`MresError::SourceLength`] otherwise). A
+    /// layout is only read where the page copies a vertex of it, every read bounds-checked.
+    pub fn decode_page(&self, p: u32, compressed: &[u8], sources: &[&[u8]]) -> Result<Page, MresError> {
+        let bytes = self.page_layout(p, compressed, sources)?;
+        page_from_layout(&self.header, &self.clusters, page_info(&self.pages, p)?, p, bytes)
+    }
+
+    /// [`MresIndex::decode_page`] up to the GPU layout only ([`Page::bytes`], what a streamer
+    /// uploads and later pages take as a source), without decoding the clusters from it: the
+    /// same checks of the bytes, the sources and the encoding, the layout valid by
+    /// construction (FORMAT.md §7).
+    pub fn page_layout(&self, p: u32, compressed: &[u8], sources: &[&[u8]]) -> Result<Vec<u8>, MresError> {
+        decompress_page(&self.header, &self.clusters, &self.pages, p, compressed, sources)
     }
 
     /// Decodes cluster `index` from its page's decompressed bytes ([`Page::bytes`]).
@@ -114,6 +137,11 @@ impl MresIndex {
 /// A parsed `.mres` file: the resident hierarchy plus the raw bytes the pages are read from.
 /// Built on [`MresIndex`]: the same records, checks and page decoding, with the file's
 /// length checked against the page table.
+///
+/// A page's sources (FORMAT.md §4.3) are decoded first, in file order; the layout of every
+/// page that is some page's source is kept once decoded (one slot per page, shared between
+/// threads), so that no page is decoded twice to serve as a source. Pages that are no page's
+/// source (most of a file: the finest level) are not kept.
 #[derive(Debug, Clone)]
 pub struct MresFile {
     /// File-wide parameters.
@@ -125,6 +153,8 @@ pub struct MresFile {
     /// Page table.
     pub pages: Vec<PageInfo>,
     bytes: Vec<u8>,
+    /// Per page: whether it is some page's source, and then its layout once decoded.
+    kept: Vec<Option<OnceLock<Vec<u8>>>>,
 }
 
 impl MresFile {
@@ -140,7 +170,14 @@ impl MresFile {
     pub fn parse(bytes: Vec<u8>) -> Result<MresFile, MresError> {
         let MresIndex { header, groups, clusters, pages, file_size } = MresIndex::parse(&bytes)?;
         check_file_len(&pages, file_size, bytes.len() as u64)?;
-        Ok(MresFile { header, groups, clusters, pages, bytes })
+        let mut is_source = vec![false; pages.len()];
+        for (p, info) in pages.iter().enumerate() {
+            for s in sources(info, p as u32) {
+                is_source[s as usize] = true;
+            }
+        }
+        let kept = is_source.into_iter().map(|s| s.then(OnceLock::new)).collect();
+        Ok(MresFile { header, groups, clusters, pages, bytes, kept })
     }
 
     /// Total file size in bytes.
@@ -148,18 +185,63 @@ impl MresFile {
         self.bytes.len()
     }
 
+    /// The whole file's bytes, as parsed.
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
     /// Verifies page `p`'s checksum and returns its decompressed bytes (the GPU layout).
     /// Its clusters are checked when decoded ([`MresFile::decode_cluster`]); to check them
     /// all at once, use [`MresFile::decode_page`].
+    /// Its sources are decoded (or taken from those kept) first.
     pub fn page(&self, p: u32) -> Result<Vec<u8>, MresError> {
-        let (info, frame) = self.frame(p)?;
-        decompress_page(&self.header, &self.clusters, info, p, frame)
+        if let Some(layout) = self.kept_layout(p) {
+            return Ok(layout.clone());
+        }
+        // Every page the page needs, directly or through its sources, not kept yet: all of
+        // them sources, so each is kept once decoded; in ascending order, each finds its own
+        // sources kept (a loop, not recursion: a chain of sources can be as long as the file).
+        let mut needed = vec![p];
+        let mut seen = std::collections::BTreeSet::new();
+        while let Some(q) = needed.pop() {
+            for s in sources(page_info(&self.pages, q)?, q) {
+                if self.kept_layout(s).is_none() && seen.insert(s) {
+                    needed.push(s);
+                }
+            }
+        }
+        for &s in &seen {
+            let layout = self.decode_layout(s)?;
+            if let Some(Some(slot)) = self.kept.get(s as usize) {
+                let _ = slot.set(layout);
+            }
+        }
+        let layout = self.decode_layout(p)?;
+        if let Some(Some(slot)) = self.kept.get(p as usize) {
+            let _ = slot.set(layout.clone());
+        }
+        Ok(layout)
     }
 
-    /// Checks, decompresses and decodes page `p`, as [`MresIndex::decode_page`] does.
-    pub fn decode_page(&self, p: u32) -> Result<Page, MresError> {
+    /// Page `p`'s layout if it is kept (a source, decoded already).
+    fn kept_layout(&self, p: u32) -> Option<&Vec<u8>> {
+        self.kept.get(p as usize)?.as_ref()?.get()
+    }
+
+    /// Decodes page `p`, whose sources are kept.
+    fn decode_layout(&self, p: u32) -> Result<Vec<u8>, MresError> {
         let (info, frame) = self.frame(p)?;
-        decode_page(&self.header, &self.clusters, info, p, frame)
+        let layouts: Vec<&[u8]> = sources(info, p)
+            .map(|s| self.kept_layout(s).map(Vec::as_slice).ok_or_else(|| corrupt(format!("page {p}: source {s}"))))
+            .collect::<Result<_, _>>()?;
+        decompress_page(&self.header, &self.clusters, &self.pages, p, frame, &layouts)
+    }
+
+    /// Checks, decompresses and decodes page `p`, as [`MresIndex::decode_page`] does (its
+    /// sources first, as [`MresFile::page`] does).
+    pub fn decode_page(&self, p: u32) -> Result<Page, MresError> {
+        let bytes = self.page(p)?;
+        page_from_layout(&self.header, &self.clusters, page_info(&self.pages, p)?, p, bytes)
     }
 
     /// Decodes cluster `index` from its page's decompressed bytes.

@@ -27,15 +27,31 @@ pub enum WriteError {
     Compress(#[from] std::io::Error),
 }
 
+/// How pages are encoded (FORMAT.md §4.3).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PageCoding {
+    /// A vertex equal to one of the page's sources (its dependencies stored before it) is a
+    /// far copy of it: smaller files, and decoding a page needs its sources' layouts.
+    #[default]
+    FarCopies,
+    /// No far copies: every page decodes alone (larger files).
+    Independent,
+}
+
 /// Serializes `dag` to a complete `.mres` file; pages are compressed with zstd at `level`.
 pub fn write_mres(dag: &Dag, level: i32) -> Result<Vec<u8>, WriteError> {
+    write_mres_with(dag, level, PageCoding::default())
+}
+
+/// [`write_mres`] with the pages encoded as `coding` says.
+pub fn write_mres_with(dag: &Dag, level: i32, coding: PageCoding) -> Result<Vec<u8>, WriteError> {
     let clusters: Vec<EncodedCluster> = dag
         .clusters
         .par_iter()
         .enumerate()
         .map(|(i, c)| EncodedCluster::new(c, &dag.header, i))
         .collect::<Result<_, _>>()?;
-    write_encoded(&dag.header, &dag.groups, clusters, level)
+    write_encoded_with(&dag.header, &dag.groups, clusters, level, coding)
 }
 
 /// [`write_mres`] for clusters already encoded with [`EncodedCluster::new`] (a large bake
@@ -49,6 +65,17 @@ pub fn write_encoded(
     encoded: Vec<EncodedCluster>,
     level: i32,
 ) -> Result<Vec<u8>, WriteError> {
+    write_encoded_with(header, groups, encoded, level, PageCoding::default())
+}
+
+/// [`write_encoded`] with the pages encoded as `coding` says.
+pub fn write_encoded_with(
+    header: &Header,
+    groups: &[Group],
+    encoded: Vec<EncodedCluster>,
+    level: i32,
+    coding: PageCoding,
+) -> Result<Vec<u8>, WriteError> {
     let layout = Layout::new(groups, &encoded)?;
     let pages = page_spans(&layout, &encoded);
     let (groups, clusters) = renumber(&layout, &pages, groups, &encoded);
@@ -60,7 +87,15 @@ pub fn write_encoded(
 
     // The pages, straight into the file after room for the header, hierarchy and table.
     let mut out = vec![0u8; (page_table_offset + page_table_size) as usize];
-    let frames = compress_pages(header, &layout, &pages, encoded, level, &mut out)?;
+    let sources: Vec<Vec<u32>> = match coding {
+        PageCoding::FarCopies => dependencies
+            .iter()
+            .enumerate()
+            .map(|(p, d)| d.iter().copied().filter(|&s| (s as usize) < p).collect())
+            .collect(),
+        PageCoding::Independent => vec![Vec::new(); pages.len()],
+    };
+    let frames = compress_pages(header, &layout, &pages, &sources, encoded, level, &mut out)?;
     let table = encode_page_table(&pages, &dependencies, &frames);
 
     let sizes = [groups.len(), clusters.len(), pages.len()].map(|n| n as u32);
@@ -168,23 +203,39 @@ struct Frame {
 }
 
 /// Compresses the pages in parallel batches, appending each to `out` in page order and freeing
-/// its clusters' data once written.
+/// its clusters' data once written and no later page's source (`sources`: per page, the
+/// pages it may copy vertices from).
 fn compress_pages(
     header: &Header,
     layout: &Layout,
     pages: &[PageSpan],
+    sources: &[Vec<u32>],
     mut encoded: Vec<EncodedCluster>,
     level: i32,
     out: &mut Vec<u8>,
 ) -> Result<Vec<Frame>, WriteError> {
-    let members = |page: &PageSpan| &layout.cluster_order[page.first_cluster as usize..][..page.cluster_count as usize];
+    let members = |p: usize| {
+        let page = &pages[p];
+        &layout.cluster_order[page.first_cluster as usize..][..page.cluster_count as usize]
+    };
+    // The last page that reads each page: itself, or the last page it is a source of.
+    let mut last_use: Vec<usize> = (0..pages.len()).collect();
+    for (p, s) in sources.iter().enumerate() {
+        for &s in s {
+            last_use[s as usize] = last_use[s as usize].max(p);
+        }
+    }
     let mut frames = Vec::with_capacity(pages.len());
-    for batch in pages.chunks(PAGE_BATCH) {
+    let mut freed = 0;
+    for start in (0..pages.len()).step_by(PAGE_BATCH) {
+        let batch = start..(start + PAGE_BATCH).min(pages.len());
         let compressed: Vec<Vec<u8>> = batch
-            .par_iter()
-            .map(|page| {
-                let clusters: Vec<&EncodedCluster> = members(page).iter().map(|&c| &encoded[c]).collect();
-                compress_page(&clusters, header, level)
+            .clone()
+            .into_par_iter()
+            .map(|p| {
+                let of = |p: usize| -> Vec<&EncodedCluster> { members(p).iter().map(|&c| &encoded[c]).collect() };
+                let source_pages: Vec<Vec<&EncodedCluster>> = sources[p].iter().map(|&s| of(s as usize)).collect();
+                compress_page(&of(p), &source_pages, header, level)
             })
             .collect::<Result<_, _>>()?;
         for frame in compressed {
@@ -195,10 +246,14 @@ fn compress_pages(
             });
             out.extend_from_slice(&frame);
         }
-        for page in batch {
-            for &c in members(page) {
+        // Pages before `freed` are freed; every page whose last reader is done goes now.
+        for p in (freed..batch.end).filter(|&p| last_use[p] < batch.end) {
+            for &c in members(p) {
                 encoded[c].data = Box::default();
             }
+        }
+        while freed < batch.end && last_use[freed] < batch.end {
+            freed += 1;
         }
         release_freed_memory();
     }
@@ -296,11 +351,21 @@ impl Layout {
 /// so that each gets its own entropy tables (the low bytes of residuals are near-random, the
 /// high ones nearly all zero). The encoding is decoded again and must give back the page's GPU
 /// layout byte for byte: a writer bug is an error here, never a file that reads differently.
-fn compress_page(clusters: &[&EncodedCluster], header: &Header, level: i32) -> Result<Vec<u8>, WriteError> {
+/// `sources` are the clusters of the page's sources, page by page (FORMAT.md §4.3): their
+/// vertices, numbered from their own blocks, are what far copies name, and their laid-out
+/// pages what the check decodes them from.
+fn compress_page(
+    clusters: &[&EncodedCluster],
+    sources: &[Vec<&EncodedCluster>],
+    header: &Header,
+    level: i32,
+) -> Result<Vec<u8>, WriteError> {
     let (raw, _) = assemble_page(clusters);
     let quantized: Vec<Quantized> = clusters.iter().map(|c| c.quantized(header.flags)).collect();
+    let source_clusters: Vec<Quantized> = sources.iter().flatten().map(|c| c.quantized(header.flags)).collect();
+    let index = codec::SourceIndex::new(&codec::source_keys(&source_clusters));
     let codec_bug = || WriteError::BadDag("the page encoding does not decode to the page (a writer bug)".into());
-    let streams = codec::encode_page(&quantized, header.flags).ok_or_else(codec_bug)?;
+    let streams = codec::encode_page(&quantized, header.flags, &index).ok_or_else(codec_bug)?;
     let encoded = streams.concat();
     if encoded.len() > MAX_PAGE_ENCODED_SIZE {
         return Err(WriteError::BadDag(format!(
@@ -308,17 +373,20 @@ fn compress_page(clusters: &[&EncodedCluster], header: &Header, level: i32) -> R
             encoded.len()
         )));
     }
-    let records: Vec<ClusterInfo> = clusters
+    let records = page_records(clusters);
+    // The sources as a reader holds them: their laid-out pages and cluster records.
+    let source_layouts: Vec<(Vec<u8>, Vec<ClusterInfo>)> = if streams[0][2] == 0 {
+        Vec::new() // no far copies: the decoder reads no source
+    } else {
+        sources.iter().map(|s| (assemble_page(s).0, page_records(s))).collect()
+    };
+    let source_pages: Vec<decode::SourcePage> = source_layouts
         .iter()
-        .map(|c| ClusterInfo {
-            group: 0,
-            own_group: NO_GROUP,
-            vertex_count: c.header.vertex_count,
-            triangle_count: c.header.triangle_count,
-            page_offset: 0,
-        })
+        .enumerate()
+        .map(|(i, (layout, records))| decode::SourcePage { index: i as u32, layout, records })
         .collect();
-    let decoded = decode::decode_page_gpu(&encoded, &records, header.flags, header.normal_bits, raw.len());
+    let decoded =
+        decode::decode_page_gpu(&encoded, &records, header.flags, header.normal_bits, raw.len(), Some(&source_pages));
     if decoded.ok() != Some(raw) {
         return Err(codec_bug());
     }
@@ -327,6 +395,22 @@ fn compress_page(clusters: &[&EncodedCluster], header: &Header, level: i32) -> R
         out.extend_from_slice(&zstd::bulk::compress(stream, level)?);
     }
     Ok(out)
+}
+
+/// The cluster records of a page of these clusters, as far as decoding reads them (counts,
+/// and each header's place in the page).
+fn page_records(clusters: &[&EncodedCluster]) -> Vec<ClusterInfo> {
+    clusters
+        .iter()
+        .enumerate()
+        .map(|(i, c)| ClusterInfo {
+            group: 0,
+            own_group: NO_GROUP,
+            vertex_count: c.header.vertex_count,
+            triangle_count: c.header.triangle_count,
+            page_offset: (i * CLUSTER_HEADER_SIZE) as u32,
+        })
+        .collect()
 }
 
 /// The GPU layout (FORMAT.md §5) of a page of quantized clusters, laid out as the writer lays
@@ -721,9 +805,54 @@ mod tests {
     /// bytes for a well-formed page, and for every corruption either both refuse it or both
     /// give the same bytes. `raw_size` is the intact page's: what the page table would say.
     fn agree(bytes: &[u8], records: &[ClusterInfo], flags: u32, normal_bits: u32, raw_size: usize) -> bool {
-        let reference = codec::decode_page(bytes, records, flags, normal_bits).map(|q| gpu_page(&q, flags));
+        agree_with(bytes, records, flags, normal_bits, raw_size, &Sources::default())
+    }
+
+    /// A page's sources as both decoders take them: the source pages' clusters and, from
+    /// them, the keys in source numbering, the laid-out pages and their records.
+    #[derive(Default)]
+    struct Sources {
+        keys: Vec<codec::VertexKey>,
+        pages: Vec<(Vec<u8>, Vec<ClusterInfo>)>,
+    }
+
+    impl Sources {
+        fn new(pages: &[Vec<Quantized>], flags: u32) -> Sources {
+            let at = |clusters: &[Quantized]| {
+                let mut r = records(clusters);
+                for (i, r) in r.iter_mut().enumerate() {
+                    r.page_offset = (i * CLUSTER_HEADER_SIZE) as u32;
+                }
+                r
+            };
+            Sources {
+                keys: codec::source_keys(pages.iter().flatten()),
+                pages: pages.iter().map(|p| (gpu_page(p, flags), at(p))).collect(),
+            }
+        }
+
+        fn fast(&self) -> Vec<decode::SourcePage<'_>> {
+            let mut out = Vec::new();
+            for (i, (layout, records)) in self.pages.iter().enumerate() {
+                out.push(decode::SourcePage { index: i as u32, layout, records });
+            }
+            out
+        }
+    }
+
+    /// [`agree`] for a page with sources.
+    fn agree_with(
+        bytes: &[u8],
+        records: &[ClusterInfo],
+        flags: u32,
+        normal_bits: u32,
+        raw_size: usize,
+        sources: &Sources,
+    ) -> bool {
+        let reference =
+            codec::decode_page(bytes, records, flags, normal_bits, &sources.keys).map(|q| gpu_page(&q, flags));
         let len = reference.as_ref().map_or(raw_size, Vec::len);
-        let fast = decode::decode_page_gpu(bytes, records, flags, normal_bits, len);
+        let fast = decode::decode_page_gpu(bytes, records, flags, normal_bits, len, Some(&sources.fast()));
         reference.is_ok() == fast.is_ok() && reference.ok() == fast.ok()
     }
 
@@ -741,11 +870,11 @@ mod tests {
                 })
                 .collect();
             let records = records(&clusters);
-            let bytes: Vec<u8> = codec::encode_page(&clusters, flags).unwrap().concat();
+            let bytes: Vec<u8> = codec::encode_page(&clusters, flags, &codec::SourceIndex::new(&[])).unwrap().concat();
             let gpu = gpu_page(&clusters, flags);
-            assert_eq!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len()), Ok(gpu.clone()));
+            assert_eq!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len(), None), Ok(gpu.clone()));
             // Any other raw size is refused.
-            assert!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len() + 4).is_err());
+            assert!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len() + 4, None).is_err());
             for i in 0..bytes.len() {
                 let mut bad = bytes.clone();
                 bad[i] ^= 1 << (i % 8);
@@ -766,9 +895,10 @@ mod tests {
         let records = records(&clusters);
         let bytes: Vec<u8> = streams.concat();
         let gpu = gpu_page(&clusters, flags);
-        assert_eq!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len()), Ok(gpu.clone()));
+        assert_eq!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len(), None), Ok(gpu.clone()));
         for low_byte in [0xfe, 0xff] {
-            let bad = decode::decode_page_gpu(&with_first_target(&streams, low_byte), &records, flags, 10, gpu.len());
+            let bad =
+                decode::decode_page_gpu(&with_first_target(&streams, low_byte), &records, flags, 10, gpu.len(), None);
             assert!(bad.unwrap_err().0.contains("copies vertex"));
         }
         for i in 0..bytes.len() {
@@ -776,5 +906,101 @@ mod tests {
             bad[i] ^= 1 << (i % 8);
             assert!(agree(&bad, &records, flags, 10, gpu.len()), "byte {i} flipped");
         }
+    }
+
+    /// Two source pages (the second repeating a cluster of the first, so that some vertices
+    /// have two source numbers) and a page repeating vertices of both and of itself.
+    fn far_pages() -> (Vec<Vec<Quantized>>, Vec<Quantized>) {
+        let sources = vec![vec![sample(50, 3), sample(30, -11)], vec![sample(50, 3)]];
+        let copy = |to: &mut Quantized, v: usize, from: &Quantized, w: usize| {
+            to.positions[v] = from.positions[w];
+            to.normals[v] = from.normals[w];
+            to.uvs[v] = from.uvs[w];
+        };
+        let mut a = sample(40, 77);
+        for v in (0..30).step_by(2) {
+            copy(&mut a, v, &sources[0][1], 29 - v);
+        }
+        for v in 33..40 {
+            copy(&mut a, v, &sources[1][0], v);
+        }
+        let mut b = sample(60, 9);
+        for v in (0..40).step_by(3) {
+            copy(&mut b, v, &a, v); // within the page
+        }
+        for v in (41..60).step_by(2) {
+            copy(&mut b, v, &sources[0][0], v - 10);
+        }
+        (sources, vec![a, b])
+    }
+
+    /// Far copies round-trip byte-exactly: the page decodes, with its sources, to the layout
+    /// of its clusters as written (the same as without far copies), both decoders agree on
+    /// every corruption, and a bad flag or source number is an error.
+    #[test]
+    fn far_copies_round_trip() {
+        let flags = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS;
+        let (source_pages, clusters) = far_pages();
+        let sources = Sources::new(&source_pages, flags);
+        let records = records(&clusters);
+        let streams = codec::encode_page(&clusters, flags, &codec::SourceIndex::new(&sources.keys)).unwrap();
+        let bytes = streams.concat();
+        let references = &streams[4];
+        // Four of the second cluster's source vertices are in the first cluster too (copied
+        // from the same vertex of the repeated source cluster): copies, not far copies.
+        assert_eq!(references.iter().filter(|&&f| f == 2).count(), 15 + 7 + 10 - 4);
+        assert_eq!(references.iter().filter(|&&f| f == 1).count(), 14 + 4);
+        let gpu = gpu_page(&clusters, flags);
+        let decoded = decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len(), Some(&sources.fast()));
+        assert_eq!(decoded, Ok(gpu.clone()));
+        assert_eq!(codec::decode_page(&bytes, &records, flags, 10, &sources.keys), Ok(clusters.clone()));
+        // Without far copies: the same layout, more bytes; and no sources are needed.
+        let alone = codec::encode_page(&clusters, flags, &codec::SourceIndex::new(&[])).unwrap().concat();
+        assert!(alone.len() >= bytes.len() + 32 * 8, "{} bytes, {} alone", bytes.len(), alone.len());
+        assert_eq!(decode::decode_page_gpu(&alone, &records, flags, 10, gpu.len(), None), Ok(gpu.clone()));
+        // Without its sources the page is refused.
+        let none = decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len(), None);
+        assert_eq!(none.unwrap_err().0, decode::NEEDS_SOURCES);
+        for i in 0..bytes.len() {
+            let mut bad = bytes.clone();
+            bad[i] ^= 1 << (i % 8);
+            assert!(agree_with(&bad, &records, flags, 10, gpu.len(), &sources), "byte {i} flipped");
+        }
+        for cut in (0..bytes.len()).step_by(5) {
+            assert!(agree_with(&bytes[..cut], &records, flags, 10, gpu.len(), &sources), "cut at {cut}");
+        }
+        // The first far copy names a source vertex before the first (−1), or past the last
+        // when the page is given fewer source vertices (U = 50: vertex 79 is the 30th of the
+        // first source's second cluster).
+        let at = streams[..5 + streams[0][1] as usize].iter().map(Vec::len).sum::<usize>();
+        assert_eq!(streams[0][2], 1, "one far target plane");
+        let mut bad = bytes.clone();
+        bad[at] = 1;
+        let fewer = Sources::new(&source_pages[1..], flags);
+        for (bad, sources) in [(&bad, &sources), (&bytes, &fewer)] {
+            let fast = decode::decode_page_gpu(bad, &records, flags, 10, gpu.len(), Some(&sources.fast()));
+            assert!(fast.unwrap_err().0.contains("source vertex"));
+            let reference = codec::decode_page(bad, &records, flags, 10, &sources.keys);
+            assert!(reference.unwrap_err().0.contains("source vertex"));
+        }
+        // A reference flag of 3.
+        let flags_at = streams[..4].iter().map(Vec::len).sum::<usize>();
+        let mut bad = bytes.clone();
+        bad[flags_at + 1] = 3;
+        let fast = decode::decode_page_gpu(&bad, &records, flags, 10, gpu.len(), Some(&sources.fast()));
+        assert!(fast.unwrap_err().0.contains("reference flag 3"));
+    }
+
+    /// Equal source vertices: the writer names the one whose coded difference is smallest.
+    #[test]
+    fn far_copies_name_the_nearest_equal_source_vertex() {
+        let keys: Vec<codec::VertexKey> = [5, 7, 5, 9, 5].iter().map(|&x| ([x, 0, 0], [0; 2], [0; 2])).collect();
+        let index = codec::SourceIndex::new(&keys);
+        let five = ([5, 0, 0], [0; 2], [0; 2]);
+        assert_eq!(index.nearest(&five, 0), Some(0));
+        assert_eq!(index.nearest(&five, 2), Some(2));
+        assert_eq!(index.nearest(&five, 3), Some(2)); // −1 codes smaller than +1
+        assert_eq!(index.nearest(&five, 9), Some(4));
+        assert_eq!(index.nearest(&([6, 0, 0], [0; 2], [0; 2]), 0), None);
     }
 }

@@ -3,8 +3,8 @@
 //! decodes exactly what the whole-file reader does.
 
 use mres_format::{
-    write_mres, ClusterHeader, Dag, DagCluster, Grid, Group, Header, MresError, MresFile, MresIndex, Sphere, UvQuant,
-    CLUSTER_HEADER_SIZE, FLAG_MATERIALS, HEADER_SIZE, NO_GROUP,
+    write_mres, write_mres_with, ClusterHeader, Dag, DagCluster, Grid, Group, Header, MresError, MresFile, MresIndex,
+    Page, PageCoding, Sphere, UvQuant, CLUSTER_HEADER_SIZE, FLAG_MATERIALS, HEADER_SIZE, NO_GROUP,
 };
 
 fn sample_dag() -> Dag {
@@ -99,7 +99,12 @@ fn typed_errors() {
     v[4] = 3;
     let error = MresFile::parse(v).unwrap_err();
     assert_eq!(error, MresError::WrongVersion { found: 3 });
-    assert_eq!(error.to_string(), "unsupported .mres version 3 (this reader reads version 4)");
+    assert_eq!(error.to_string(), "unsupported .mres version 3 (this reader reads version 5)");
+    // Version 4 had no far copies (§8): its pages would decode, but it is refused like the rest.
+    let mut v = bytes.clone();
+    v[4] = 4;
+    let error = MresFile::parse(v).unwrap_err();
+    assert!(error.to_string().starts_with("unsupported .mres version 4"), "{error}");
     let mut v = bytes.clone();
     v[0] = b'X';
     assert_eq!(MresFile::parse(v).unwrap_err(), MresError::BadMagic);
@@ -175,6 +180,135 @@ fn multi_page_dag(n: u32) -> Dag {
     }
 }
 
+/// [`multi_page_dag`] with half the vertices of each level-0 cluster equal to vertices of the
+/// coarser cluster its group produced (as simplification keeps them), which lies in an
+/// earlier page: far copies (docs/FORMAT.md §4.3).
+fn far_dag(n: u32) -> Dag {
+    let mut dag = multi_page_dag(n);
+    for g in 0..n as usize {
+        let coarse = dag.clusters[n as usize + g].positions.clone();
+        for v in (0..256).step_by(2) {
+            dag.clusters[g].positions[v] = coarse[255 - v];
+        }
+    }
+    dag
+}
+
+/// Decodes every page of `bytes` in file order through the page-level reader, each given its
+/// sources' layouts decoded before it, as a streamer does.
+fn decode_in_file_order(bytes: &[u8]) -> Vec<Page> {
+    let index = index_of(bytes);
+    let mut pages: Vec<Page> = Vec::new();
+    for p in 0..index.pages.len() as u32 {
+        let range = index.page_range(p).unwrap();
+        let sources: Vec<&[u8]> =
+            index.page_sources(p).unwrap().iter().map(|&s| &pages[s as usize].bytes[..]).collect();
+        let page = index.decode_page(p, &bytes[range.start as usize..range.end as usize], &sources).unwrap();
+        pages.push(page);
+    }
+    pages
+}
+
+#[test]
+fn far_copies_decode_to_the_layout_of_independent_pages() {
+    let dag = far_dag(120);
+    let far = write_mres(&dag, 1).unwrap();
+    let alone = write_mres_with(&dag, 1, PageCoding::Independent).unwrap();
+    let (index, index_alone) = (index_of(&far), index_of(&alone));
+    assert!(
+        index.pages.len() >= 3 && (0..index.pages.len() as u32).any(|p| !index.page_sources(p).unwrap().is_empty())
+    );
+    // The same GPU layout page by page (the version-4 rule), in fewer bytes.
+    let (pages, pages_alone) = (decode_in_file_order(&far), decode_in_file_order(&alone));
+    assert_eq!(pages, pages_alone);
+    assert!(far.len() + 10_000 < alone.len(), "{} bytes with far copies, {} without", far.len(), alone.len());
+    // Independent pages hold no far copy: each decodes alone.
+    let fetch = |bytes: &[u8], i: &MresIndex, p: u32| {
+        let r = i.page_range(p).unwrap();
+        bytes[r.start as usize..r.end as usize].to_vec()
+    };
+    for p in 0..index.pages.len() as u32 {
+        assert_eq!(index_alone.decode_page(p, &fetch(&alone, &index_alone, p), &[]).unwrap(), pages_alone[p as usize]);
+    }
+    // With far copies, a page that has them needs its sources; the whole-file reader finds
+    // them itself.
+    let file = MresFile::parse(far.clone()).unwrap();
+    let mut needing = 0;
+    for p in 0..index.pages.len() as u32 {
+        let sources = index.page_sources(p).unwrap();
+        let expected = sources.len();
+        match index.decode_page(p, &fetch(&far, &index, p), &[]) {
+            Err(e) => {
+                assert_eq!(e, MresError::SourceCount { page: p, given: 0, expected });
+                needing += 1;
+            }
+            Ok(page) => assert_eq!(page, pages[p as usize]),
+        }
+        assert_eq!(file.decode_page(p).unwrap(), pages[p as usize]);
+    }
+    assert!(needing > 0, "no page has far copies");
+}
+
+fn as_slices(s: &[Vec<u8>]) -> Vec<&[u8]> {
+    s.iter().map(Vec::as_slice).collect()
+}
+
+#[test]
+fn wrong_sources_are_errors() {
+    let far = write_mres(&far_dag(120), 1).unwrap();
+    let index = index_of(&far);
+    let pages = decode_in_file_order(&far);
+    // The last page with far copies: one that needs its sources.
+    let fetch = |p: u32| {
+        let r = index.page_range(p).unwrap();
+        &far[r.start as usize..r.end as usize]
+    };
+    let p = (0..index.pages.len() as u32).rev().find(|&p| index.decode_page(p, fetch(p), &[]).is_err()).unwrap();
+    let compressed = fetch(p);
+    let sources: Vec<Vec<u8>> =
+        index.page_sources(p).unwrap().iter().map(|&s| pages[s as usize].bytes.clone()).collect();
+    assert_eq!(index.decode_page(p, compressed, &as_slices(&sources)).unwrap(), pages[p as usize]);
+    // One source too many.
+    let mut more = sources.clone();
+    more.push(sources[0].clone());
+    let expected = sources.len();
+    assert_eq!(
+        index.decode_page(p, compressed, &as_slices(&more)).unwrap_err(),
+        MresError::SourceCount { page: p, given: expected + 1, expected }
+    );
+    // A source one byte short.
+    let s = index.page_sources(p).unwrap()[0];
+    let mut short = sources.clone();
+    short[0].pop();
+    assert_eq!(
+        index.decode_page(p, compressed, &as_slices(&short)).unwrap_err(),
+        MresError::SourceLength {
+            page: p,
+            source_page: s,
+            len: sources[0].len() - 1,
+            expected: sources[0].len() as u32
+        }
+    );
+    // Source layouts of the right length whose headers point outside them, or that are all
+    // zero: errors, never a panic (nor a page that decodes to other values).
+    let mut bad = sources.clone();
+    for (layout, &s) in bad.iter_mut().zip(&index.page_sources(p).unwrap()) {
+        for h in layout.chunks_exact_mut(CLUSTER_HEADER_SIZE).take(index.pages[s as usize].cluster_count as usize) {
+            h[20..24].copy_from_slice(&u32::MAX.to_le_bytes());
+        }
+    }
+    let zero: Vec<Vec<u8>> = sources.iter().map(|s| vec![0; s.len()]).collect();
+    for bad in [bad, zero] {
+        match index.decode_page(p, compressed, &as_slices(&bad)) {
+            Err(MresError::Decompress { page, problem }) => {
+                assert!(page == p && problem.contains("source page"), "{problem}")
+            }
+            Err(other) => panic!("{other:?}"),
+            Ok(_) => panic!("page {p} decoded from corrupt sources"),
+        }
+    }
+}
+
 /// Parses the prefix the way a streamer does: the header first, then the length it declares.
 fn index_of(bytes: &[u8]) -> MresIndex {
     let prefix_len = MresIndex::prefix_len(&bytes[..HEADER_SIZE]).unwrap();
@@ -183,9 +317,10 @@ fn index_of(bytes: &[u8]) -> MresIndex {
 
 #[test]
 fn pages_fetched_separately_decode_as_the_whole_file() {
-    let bytes = write_mres(&multi_page_dag(120), 1).unwrap();
+    let bytes = write_mres(&far_dag(120), 1).unwrap();
     let file = MresFile::parse(bytes.clone()).unwrap();
     assert!(file.pages.len() >= 3, "only {} pages: the test needs several", file.pages.len());
+    let mut layouts: Vec<Vec<u8>> = Vec::new();
     let index = index_of(&bytes);
     assert_eq!(index.header, file.header);
     assert_eq!(index.groups, file.groups);
@@ -199,7 +334,10 @@ fn pages_fetched_separately_decode_as_the_whole_file() {
         let range = index.page_range(p).unwrap();
         // Bytes the caller fetched itself, not a view of the parsed prefix.
         let fetched = bytes[range.start as usize..range.end as usize].to_vec();
-        let page = index.decode_page(p, &fetched).unwrap();
+        let sources: Vec<&[u8]> =
+            index.page_sources(p).unwrap().iter().map(|&s| layouts[s as usize].as_slice()).collect();
+        let page = index.decode_page(p, &fetched, &sources).unwrap();
+        layouts.push(page.bytes.clone());
         assert_eq!(page, file.decode_page(p).unwrap());
         assert_eq!(page.bytes, file.page(p).unwrap());
         assert_eq!(page.index, p);
@@ -227,26 +365,26 @@ fn a_corrupt_fetched_page_gives_the_right_error() {
     let page = &bytes[range.start as usize..range.end as usize];
     let expected = index.pages[p as usize].compressed_size;
     assert_eq!(
-        index.decode_page(p, &page[..page.len() - 1]).unwrap_err(),
+        index.decode_page(p, &page[..page.len() - 1], &[]).unwrap_err(),
         MresError::PageLength { page: p, len: expected as u64 - 1, expected }
     );
     let mut longer = page.to_vec();
     longer.push(0);
     assert_eq!(
-        index.decode_page(p, &longer).unwrap_err(),
+        index.decode_page(p, &longer, &[]).unwrap_err(),
         MresError::PageLength { page: p, len: expected as u64 + 1, expected }
     );
     for at in [0, page.len() / 2, page.len() - 1] {
         let mut flipped = page.to_vec();
         flipped[at] ^= 0x10;
-        assert_eq!(index.decode_page(p, &flipped).unwrap_err(), MresError::Checksum(format!("page {p}")));
+        assert_eq!(index.decode_page(p, &flipped, &[]).unwrap_err(), MresError::Checksum(format!("page {p}")));
     }
     // Another page's bytes, of the same length or not, are never taken for this page's.
     let other = index.page_range(0).unwrap();
-    assert!(index.decode_page(p, &bytes[other.start as usize..other.end as usize]).is_err());
+    assert!(index.decode_page(p, &bytes[other.start as usize..other.end as usize], &[]).is_err());
     let missing = index.pages.len() as u32;
     assert!(matches!(index.page_range(missing), Err(MresError::Corrupt(_))));
-    assert!(matches!(index.decode_page(missing, page), Err(MresError::Corrupt(_))));
+    assert!(matches!(index.decode_page(missing, page, &[]), Err(MresError::Corrupt(_))));
 }
 
 #[test]
@@ -334,7 +472,9 @@ fn corrupt_page_encodings_are_errors_not_panics() {
             let mut flipped = encoded.clone();
             flipped[at] ^= mask;
             let result = parse_and_decode(with_encoded_page(&bytes, &flipped));
-            if at < length_bytes {
+            // Byte 2 is the far target plane count F, which a page without far copies (this
+            // one-page file) multiplies by zero: any F up to 4 is accepted (§4.3, §7).
+            if at < length_bytes && !(at == 2 && flipped[2] <= 4) {
                 assert!(result.is_err(), "flipping preamble/length byte {at} with {mask:#x} was accepted");
             }
         }

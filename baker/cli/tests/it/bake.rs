@@ -6,7 +6,7 @@ use mres_build::bake::{bake as bake_source, bake_file};
 use mres_build::BakeSettings;
 use mres_check::validate::{validate, Report, ValidateOptions};
 use mres_cli::generate;
-use mres_format::{select, MresFile, NO_GROUP};
+use mres_format::{select, MresFile, MresIndex, NO_GROUP};
 use mres_import::SourceMesh;
 use std::path::{Path, PathBuf};
 
@@ -174,4 +174,31 @@ fn output_is_identical_for_any_thread_count() {
     assert_eq!(one, bake_with(2));
     assert_eq!(one, bake_with(4));
     assert_eq!(one, bake_with(1), "repeat run");
+}
+
+/// `independent_pages = true` writes no far copy (docs/FORMAT.md §4.3): every page decodes
+/// alone, to the same GPU layout as the default bake's, which has pages that need their
+/// sources and is smaller.
+#[test]
+fn independent_pages_decode_alone() {
+    let mesh = || generate::sphere(60);
+    let far = bake(mesh());
+    let settings = BakeSettings { independent_pages: true, ..Default::default() };
+    let alone = bake_source(mesh(), &settings, &|_| {}).expect("bake").bytes;
+    assert!(far.len() < alone.len(), "{} bytes with far copies, {} without", far.len(), alone.len());
+    let (index_far, index_alone) = (MresIndex::parse(&far).unwrap(), MresIndex::parse(&alone).unwrap());
+    assert_eq!(index_far.pages.len(), index_alone.pages.len());
+    let whole = MresFile::parse(far.clone()).unwrap();
+    let fetch = |bytes: &[u8], index: &MresIndex, p: u32| {
+        let r = index.page_range(p).unwrap();
+        bytes[r.start as usize..r.end as usize].to_vec()
+    };
+    let mut needing = 0;
+    for p in 0..index_far.pages.len() as u32 {
+        // A reference flag 2 would need the page's sources: decoding without them proves none.
+        let page = index_alone.decode_page(p, &fetch(&alone, &index_alone, p), &[]).expect("decodes alone");
+        assert_eq!(page.bytes, whole.page(p).unwrap(), "page {p}: the same GPU layout");
+        needing += index_far.decode_page(p, &fetch(&far, &index_far, p), &[]).is_err() as usize;
+    }
+    assert!(needing > 0, "the default bake has no far copies");
 }

@@ -127,9 +127,12 @@ static uint32_t check_cluster(const MresIndex *index, const MresInfo *info, cons
     return (uint32_t)t;
 }
 
-/* Fetches, decodes and checks page `p`; adds its figures to the totals. */
-static void load_page(FILE *file, const MresIndex *index, const MresInfo *info, uint32_t p,
-                      uint64_t *triangles, uint64_t *gpu_bytes) {
+/* Fetches, decodes and checks page `p`, given `pages`, the pages decoded before it (its
+   sources are among them: they come before it in the file); adds its figures to the totals
+   and returns it. */
+static MresPage *load_page(FILE *file, const MresIndex *index, const MresInfo *info, uint32_t p,
+                           MresPage *const *pages, uint64_t *triangles, uint64_t *gpu_bytes,
+                           uint64_t *sources) {
     MresPageInfo entry;
     CHECK_CALL(mres_index_page(index, p, &entry));
     uint64_t offset, size;
@@ -137,8 +140,21 @@ static void load_page(FILE *file, const MresIndex *index, const MresInfo *info, 
     EXPECT(offset == entry.offset && size == entry.compressed_size, "page %u: range", p);
     size_t got;
     uint8_t *bytes = fetch(file, offset, (size_t)size, &got);
+    size_t source_count;
+    CHECK_CALL(mres_page_sources(index, p, NULL, 0, &source_count));
+    uint32_t *source_pages = malloc(sizeof *source_pages * (source_count ? source_count : 1));
+    const MresPage **source_handles = malloc(sizeof *source_handles * (source_count ? source_count : 1));
+    EXPECT(source_pages != NULL && source_handles != NULL, "out of memory");
+    CHECK_CALL(mres_page_sources(index, p, source_pages, source_count, &source_count));
+    for (size_t i = 0; i < source_count; i++) {
+        EXPECT(source_pages[i] < p, "page %u: source %u is not before it", p, source_pages[i]);
+        source_handles[i] = pages[source_pages[i]];
+    }
+    *sources += source_count;
     MresPage *page = NULL;
-    CHECK_CALL(mres_page_decode(index, p, bytes, got, &page));
+    CHECK_CALL(mres_page_decode(index, p, bytes, got, source_handles, source_count, &page));
+    free(source_handles);
+    free(source_pages);
     free(bytes);
 
     const uint8_t *gpu;
@@ -155,7 +171,7 @@ static void load_page(FILE *file, const MresIndex *index, const MresInfo *info, 
         EXPECT(rec.page == p, "cluster %u: record says page %u, found in page %u", c, rec.page, p);
         *triangles += check_cluster(index, info, page, c);
     }
-    mres_page_free(page);
+    return page;
 }
 
 /* Sizes of the uniform cuts at error 0 (the original clusters) and at FLT_MAX (the root). */
@@ -180,13 +196,18 @@ int main(int argc, char **argv) {
     MresInfo info;
     CHECK_CALL(mres_index_info(index, &info));
 
-    uint64_t triangles = 0, gpu_bytes = 0, dependencies = 0;
+    uint64_t triangles = 0, gpu_bytes = 0, dependencies = 0, sources = 0;
+    /* Every page stays decoded until the end: a later page may copy vertices of it. */
+    MresPage **pages = malloc(sizeof *pages * (info.page_count ? info.page_count : 1));
+    EXPECT(pages != NULL, "out of memory");
     for (uint32_t p = 0; p < info.page_count; p++) {
         size_t deps;
         CHECK_CALL(mres_page_dependencies(index, p, NULL, 0, &deps));
         dependencies += deps;
-        load_page(file, index, &info, p, &triangles, &gpu_bytes);
+        pages[p] = load_page(file, index, &info, p, pages, &triangles, &gpu_bytes, &sources);
     }
+    for (uint32_t p = 0; p < info.page_count; p++) mres_page_free(pages[p]);
+    free(pages);
     uint64_t vertices = 0;
     for (uint32_t c = 0; c < info.cluster_count; c++) {
         MresCluster rec;
@@ -197,6 +218,7 @@ int main(int argc, char **argv) {
            info.page_count, info.cluster_count, (unsigned long long)triangles,
            (unsigned long long)vertices, (unsigned long long)gpu_bytes);
     printf("dependencies %llu\n", (unsigned long long)dependencies);
+    printf("sources %llu\n", (unsigned long long)sources);
     print_cuts(index, &info);
     printf("read_bytes %llu\nhash %016llx\n", (unsigned long long)read_bytes,
            (unsigned long long)hash);
