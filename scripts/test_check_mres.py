@@ -898,17 +898,34 @@ def far_copies(data, p):
     return enc, refs_at + V + enc[1] * refs.count(1), refs.count(2), enc[2]
 
 
-def test_level0_pages_copy_from_their_sources(baked):
-    """Far copies are exercised: the finest page of each file copies vertices
-    from the coarser pages it depends on."""
-    for name, f in baked[1].items():
-        data = bytearray(f.read_bytes())
-        p = header(data)["P"] - 1
-        _, _, G, F = far_copies(data, p)
-        assert G > 0 and F >= 1 and page_sources(data, p), f"{name}: page {p} has no far copies"
+@pytest.fixture(scope="module")
+def paged(tmp_path_factory):
+    """A file of several pages (the small ones above fit in one): (directory,
+    {"sphere": path})."""
+    if not MRES.exists() or not BAKE_ALL.exists():
+        pytest.skip("Rust tools not built: cargo build --release -p mres-cli")
+    d = tmp_path_factory.mktemp("paged")
+    subprocess.run([str(MRES), "generate", "sphere", "48", "-o", str(d / "sphere.obj")], check=True,
+                   capture_output=True)
+    subprocess.run([str(BAKE_ALL), str(d / "sphere.obj"), "-o", str(d / "out"), "-j", "1"], check=True,
+                   capture_output=True)
+    f = d / "out" / "sphere.mres"
+    assert header(f.read_bytes())["P"] >= 3, f"{f}: fewer than 3 pages"
+    return d, {"sphere": f}
 
 
-def test_far_target_before_the_sources_is_rejected(baked):
+def test_the_finest_page_copies_from_its_sources(paged):
+    """Far copies are exercised: the finest page copies vertices from the
+    coarser pages it depends on, and the file passes."""
+    data = bytearray(paged[1]["sphere"].read_bytes())
+    p = header(data)["P"] - 1
+    _, _, G, F = far_copies(data, p)
+    assert G > 0 and F >= 1 and page_sources(data, p), f"page {p} has no far copies"
+    proc = run_checker(paged[1]["sphere"], *FAST)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_far_target_before_the_sources_is_rejected(paged):
     """The first far copy of the finest page names source vertex -1: the
     lengths still match, the target does not."""
     def mutate(data):
@@ -917,12 +934,12 @@ def test_far_target_before_the_sources_is_rejected(baked):
         for k in range(F):
             enc[at + k * G] = 1 if k == 0 else 0  # zigzag(-1) = 1
         store_page(data, p, zstandard.ZstdCompressor(level=3).compress(bytes(enc)))
-    proc = run_on(baked, "terrain", "far-before", mutate)
+    proc = run_on(paged, "sphere", "far-before", mutate)
     assert_caught(proc, "page_encoding")
     assert "copies source vertex -1" in proc.stdout, proc.stdout
 
 
-def test_a_page_whose_source_fails_is_reported(baked):
+def test_a_page_whose_source_fails_is_reported(paged):
     """A source page that does not decode: the pages copying from it are
     reported too, not decoded from nothing."""
     def mutate(data):
@@ -930,6 +947,6 @@ def test_a_page_whose_source_fails_is_reported(baked):
         q = page_sources(data, last)[0]
         rec = page(data, q)
         data[rec["offset"]] ^= 0xFF
-    proc = run_checker(corrupted(baked, "terrain", "source-fails", mutate), *FAST)
+    proc = run_checker(corrupted(paged, "sphere", "source-fails", mutate), *FAST)
     assert_caught(proc, "page_checksum")
     assert "did not decode" in proc.stdout, proc.stdout
