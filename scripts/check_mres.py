@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent checker for `.mres` files (format version 4).
+"""Independent checker for `.mres` files (format version 5).
 
 Written from docs/FORMAT.md alone, as a second implementation next to the Rust
 reader/validator: it reads every section with numpy, verifies checksums,
@@ -43,7 +43,7 @@ except ImportError as exc:  # pragma: no cover - environment problem
 # ---------------------------------------------------------------------------
 
 MAGIC = b"MRES"
-VERSION = 4
+VERSION = 5
 HEADER_SIZE = 160
 GROUP_SIZE = 40
 CLUSTER_SIZE = 16
@@ -271,17 +271,19 @@ def wrap16(x):
     return x & 0xFFFF
 
 
-def decode_encoded_page(enc, vcs, tcs, flags):
+def decode_encoded_page(enc, vcs, tcs, flags, sources=()):
     """The clusters of a page from its encoded bytes (section 4.3): per cluster
     a dict of grid coordinates q, octahedral values, UVs, indices, marks and
-    materials. Raises PageError."""
+    materials. `sources` lists the vertices of the page's sources in source
+    numbering, each a tuple (q, octahedral value, UV) (None for what the file
+    lacks). Raises PageError."""
     n, V, T = len(vcs), int(sum(vcs)), int(sum(tcs))
     if len(enc) < 4 + 2 * n:
         raise PageError(f"{len(enc)} encoded bytes, shorter than the preamble and index lengths")
-    P, R = enc[0], enc[1]
-    if not 1 <= P <= 4 or R > 4 or any(enc[2:4]):
-        raise PageError(f"preamble {enc[0:4].hex()}: position planes outside 1..=4, target planes over 4 "
-                        "or reserved bytes not zero")
+    P, R, F = enc[0], enc[1], enc[2]
+    if not 1 <= P <= 4 or R > 4 or F > 4 or enc[3]:
+        raise PageError(f"preamble {enc[0:4].hex()}: position planes outside 1..=4, target or far target "
+                        "planes over 4 or reserved byte not zero")
     lengths = struct.unpack_from(f"<{n}H", enc, 4)
     for i, (L, t) in enumerate(zip(lengths, tcs)):
         if L > 17 + 8 * t:
@@ -297,21 +299,23 @@ def decode_encoded_page(enc, vcs, tcs, flags):
     if len(refs) < V:
         raise PageError(f"{len(enc)} encoded bytes end before the reference flags")
     at += V
-    bad = [f for f in refs if f > 1]
+    bad = [f for f in refs if f > 2]
     if bad:
-        raise PageError(f"reference flag {bad[0]} is neither 0 nor 1")
-    Cp = sum(refs)
-    S = V - Cp
-    expect = (4 + 2 * n + sum(lengths) + T + V + R * Cp + 3 * P * S + 4 * S * has_n + 4 * S * has_u
+        raise PageError(f"reference flag {bad[0]} is none of 0, 1 and 2")
+    Cp, G = refs.count(1), refs.count(2)
+    S = V - Cp - G
+    expect = (4 + 2 * n + sum(lengths) + T + V + R * Cp + F * G + 3 * P * S + 4 * S * has_n + 4 * S * has_u
               + 2 * T * has_m)
     if len(enc) != expect:
-        raise PageError(f"{len(enc)} encoded bytes, the counts, index lengths, {P} planes and {Cp} copies "
-                        f"with {R} target planes need {expect}")
+        raise PageError(f"{len(enc)} encoded bytes, the counts, index lengths, {P} planes, {Cp} copies with "
+                        f"{R} target planes and {G} far copies with {F} planes need {expect}")
     bad = [m for m in marks if m > 7]
     if bad:
         raise PageError(f"open-edge mark {bad[0]} has bits above bit 2")
     targets = [unzigzag(z, 32) for z in planes(enc, at, Cp, R)]
     at += R * Cp
+    far = [unzigzag(z, 32) for z in planes(enc, at, G, F)]
+    at += F * G
     pos = [unzigzag(z, 32) for z in planes(enc, at, 3 * S, P)]
     at += 3 * P * S
     nrm = uvs = mat = None
@@ -326,6 +330,7 @@ def decode_encoded_page(enc, vcs, tcs, flags):
     out = []
     to = 0
     page = {"refs": refs, "targets": iter(targets), "next_target": 0, "decoded": [], "stored": 0,
+            "far": iter(far), "next_far": 0, "sources": sources,
             "anchor": ([0, 0, 0], [0, 0], [0, 0])}
     for i, (L, vc, tc) in enumerate(zip(lengths, vcs, tcs)):
         vc, tc = int(vc), int(tc)
@@ -354,10 +359,22 @@ def decode_encoded_page(enc, vcs, tcs, flags):
     return out
 
 
+def source_vertices(clusters):
+    """A decoded page's vertices in source numbering (section 4.3): cluster by
+    cluster, each by vertex index, as (q, octahedral value, UV) tuples."""
+    out = []
+    for c in clusters:
+        nv, uv = c.get("normals"), c.get("uvs")
+        for v in range(len(c["q"])):
+            out.append((c["q"][v], nv[v] if nv is not None else None, uv[v] if uv is not None else None))
+    return out
+
+
 def rebuild_cluster(order, page, residuals):
     """One cluster's values (grid coordinates, octahedral values, UVs; None
     for an attribute the file lacks) in decoding order (section 4.3): a copy
     (reference flag 1) takes every attribute of the vertex its target names, a
+    far copy (flag 2) those of the source vertex its far target names, a
     stored vertex is its prediction plus its residuals. `page` carries the
     page's state from cluster to cluster."""
     vc = len(order)
@@ -366,7 +383,16 @@ def rebuild_cluster(order, page, residuals):
     values = [[None] * vc if res is not None else None for res in residuals]
     for v, pred in order:
         j = len(page["decoded"])
-        if page["refs"][j]:
+        if page["refs"][j] == 2:
+            u = page["next_far"] + next(page["far"])
+            if not 0 <= u < len(page["sources"]):
+                raise PageError(f"vertex {j} of the page copies source vertex {u}, but its sources hold "
+                                f"{len(page['sources'])}")
+            page["next_far"] = u + 1
+            for a in range(3):
+                if values[a] is not None:
+                    values[a][v] = list(page["sources"][u][a])
+        elif page["refs"][j]:
             t = page["next_target"] + next(page["targets"])
             if not 0 <= t < j:
                 raise PageError(f"vertex {j} of the page copies vertex {t}, not one decoded before it")
@@ -532,6 +558,10 @@ class Checker:
         if version == 3:
             r.fatal("bad_version", f"version 3, this checker reads version {VERSION} only (version 3 stored "
                                    "every vertex of a page with residuals, without copies of repeated vertices; "
+                                   "re-bake the mesh with the current baker)")
+        if version == 4:
+            r.fatal("bad_version", f"version 4, this checker reads version {VERSION} only (version 4 stored "
+                                   "every vertex again that an earlier dependency page holds, without far copies; "
                                    "re-bake the mesh with the current baker)")
         if version != VERSION:
             r.fatal("bad_version", f"version {version}, this checker reads version {VERSION}")
@@ -914,6 +944,7 @@ class Checker:
         r, C, P = self.r, self.C, self.P
         t = time.perf_counter()
         self.page_decoded = np.zeros(P, dtype=bool)
+        decoded = [None] * P  # per page, its clusters as decoded (for the pages that copy from it)
         chunks = []
         base = np.zeros(P, dtype=np.int64)
         hdr = np.zeros(C, dtype=CHDR_DT)
@@ -943,8 +974,16 @@ class Checker:
             if len(enc) > most:
                 r.violation("page_decompress", f"page {p}: decompresses to more than the {most} bytes its counts allow")
                 continue
+            sources = self.page_sources(p)
+            missing = [q for q in sources if decoded[q] is None]
+            if missing:
+                r.violation("page_encoding", f"page {p}: its source page {missing[0]} (an earlier dependency it may "
+                                             "copy vertices from) did not decode")
+                continue
+            source_list = [v for q in sources for v in source_vertices(decoded[q])]
             try:
-                raw = gpu_layout(decode_encoded_page(enc, vcs, tcs, self.flags), self.flags)
+                clusters = decode_encoded_page(enc, vcs, tcs, self.flags, source_list)
+                raw = gpu_layout(clusters, self.flags)
             except PageError as exc:
                 r.violation("page_encoding", f"page {p}: {exc}")
                 continue
@@ -959,6 +998,7 @@ class Checker:
             hdr[first:first + n] = np.frombuffer(raw, CHDR_DT, count=n)
             have_hdr[first:first + n] = True
             self.page_decoded[p] = True
+            decoded[p] = clusters
             base[p] = pos
             pad = (-len(raw)) % 4
             chunks.append(raw)
@@ -974,6 +1014,14 @@ class Checker:
         self.have_hdr = have_hdr
         r.figures["zstd_frames_per_page"] = sorted(set(frames))
         self._lap("decompress", t)
+
+    def page_sources(self, p):
+        """Page p's sources (section 4.3): its dependencies before it, in the
+        array's order (none where its dependency range is out of bounds)."""
+        first, count = int(self.pdfirst[p]), int(self.pdcount[p])
+        if first + count > self.D:
+            return []
+        return [int(q) for q in self.deps[first:first + count] if q < p]
 
     def check_cluster_headers(self):
         r, C = self.r, self.C

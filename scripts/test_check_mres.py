@@ -129,15 +129,40 @@ def predicted(values, pred, anchor):
     return values[pred[0]] if pred else anchor
 
 
-def decode_page(data, p):
+def page_sources(data, p):
+    """Page p's sources (§4.3): its dependencies before it, in the array's order."""
+    rec = page(data, p)
+    first, count = struct.unpack_from("<II", data, rec["rec"] + 64)
+    at = header(data)["pt_off"] + 72 * header(data)["P"] + 4 * first
+    return [q for q in struct.unpack_from(f"<{count}I", data, at) if q < p]
+
+
+def source_values(data, p, decoded):
+    """The vertices of page p's sources in source numbering (§4.3), each
+    {attribute: value} with grid coordinates modulo 2^32 as decoding keeps them."""
+    out = []
+    for q in page_sources(data, p):
+        for c in decode_page(data, q, decoded):
+            for v in range(len(c["q"])):
+                out.append({name: ([x % (1 << 32) for x in c[name][v]] if name == "q" else c[name][v])
+                            for name in ("q", "normals", "uvs") if c[name] is not None})
+    return out
+
+
+def decode_page(data, p, decoded=None):
     """The clusters of page p: grid coordinates q, octahedral normals, UVs,
-    indices, marks and materials (lists; None for what the file lacks)."""
+    indices, marks and materials (lists; None for what the file lacks).
+    `decoded` caches pages by index (a page's sources are decoded first)."""
+    decoded = {} if decoded is None else decoded
+    if p in decoded:
+        return decoded[p]
+    sources = source_values(data, p, decoded)
     flags = struct.unpack_from("<I", data, 12)[0]
     rec = page(data, p)
     cls = [cluster(data, rec["first"] + i) for i in range(rec["count"])]
     enc = page_encoded(data, p)
     n, V, T = len(cls), sum(c["vc"] for c in cls), sum(c["tc"] for c in cls)
-    planes, target_planes = enc[0], enc[1]
+    planes, target_planes, far_planes = enc[0], enc[1], enc[2]
     lengths = struct.unpack_from(f"<{n}H", enc, 4)
     at = 4 + 2 * n
     coded_at = at
@@ -146,10 +171,12 @@ def decode_page(data, p):
     at += T
     copies = list(enc[at:at + V])
     at += V
-    C = sum(copies)
-    S = V - C
+    C, G = copies.count(1), copies.count(2)
+    S = V - C - G
     targets = iter(byte_planes(enc, at, C, target_planes))
     at += target_planes * C
+    far = iter(byte_planes(enc, at, G, far_planes))
+    at += far_planes * G
     attrs = {"q": (byte_planes(enc, at, 3 * S, planes), 3, 32)}
     at += 3 * planes * S
     for name, flag in (("normals", FLAG_NORMALS), ("uvs", FLAG_UVS)):
@@ -158,8 +185,8 @@ def decode_page(data, p):
             at += 4 * S
     materials = byte_planes(enc, at, T, 2) if flags & FLAG_MATERIALS else None
     anchors = {name: [0] * lanes for name, (_, lanes, _) in attrs.items()}
-    out, to, j, k, next_target = [], 0, 0, 0, 0
-    decoded = []  # every vertex of the page in decoding order: {attribute: value}
+    out, to, j, k, next_target, next_far = [], 0, 0, 0, 0, 0
+    decoded_vertices = []  # every vertex of the page in decoding order: {attribute: value}
     for i, (c, L) in enumerate(zip(cls, lengths)):
         tri = [int(x) for x in meshopt.decode_index_buffer(bytes(enc[coded_at:coded_at + L]), 3 * c["tc"], 4)]
         coded_at += L
@@ -168,18 +195,23 @@ def decode_page(data, p):
              "materials": materials[to:to + c["tc"]] if materials else None, "normals": None, "uvs": None}
         values = {name: [None] * c["vc"] for name in attrs}
         for v, pred in order:
-            if copies[j]:
+            if copies[j] == 2:
+                u = next_far + signed(next(far))
+                next_far = u + 1
+                for name in attrs:
+                    values[name][v] = sources[u][name]
+            elif copies[j]:
                 t = next_target + signed(next(targets))
                 next_target = t + 1
                 for name in attrs:
-                    values[name][v] = decoded[t][name]
+                    values[name][v] = decoded_vertices[t][name]
             else:
                 for name, (res, lanes, bits) in attrs.items():
                     r = res[lanes * k:lanes * (k + 1)]
                     p_ = predicted(values[name], pred, anchors[name])
                     values[name][v] = [(x + signed(z)) % (1 << bits) for x, z in zip(p_, r)]
                 k += 1
-            decoded.append({name: values[name][v] for name in attrs})
+            decoded_vertices.append({name: values[name][v] for name in attrs})
             j += 1
         for name, (_, _, bits) in attrs.items():
             anchors[name] = values[name][order[0][0]]
@@ -189,6 +221,7 @@ def decode_page(data, p):
             d[name] = vals
         out.append(d)
         to += c["tc"]
+    decoded[p] = out
     return out
 
 
@@ -300,7 +333,8 @@ def replace_page(data, p, clusters, edit=None):
 
 
 def all_clusters(data):
-    return [c for p in range(header(data)["P"]) for c in decode_page(data, p)]
+    decoded = {}
+    return [c for p in range(header(data)["P"]) for c in decode_page(data, p, decoded)]
 
 
 def edge_uses(c):
@@ -331,7 +365,7 @@ def baked(tmp_path_factory):
     files = {k: out / f"{k}.mres" for k in ("sphere", "terrain", "boxes")}
     for f in files.values():
         assert f.exists(), f
-        assert struct.unpack_from("<I", f.read_bytes(), 4)[0] == 4, f"{f}: not format version 4 (stale build?)"
+        assert struct.unpack_from("<I", f.read_bytes(), 4)[0] == 5, f"{f}: not format version 5 (stale build?)"
     return d, files
 
 
@@ -580,8 +614,9 @@ def pick(data, want_level0, test):
     """(page, clusters of that page, position in it) of the first cluster of
     the wanted kind for which test(cluster) holds. Outputs are taken only where
     some uniform cut draws them (own error < parent error)."""
+    decoded = {}
     for p in range(header(data)["P"]):
-        cls = decode_page(data, p)
+        cls = decode_page(data, p, decoded)
         for i, c in enumerate(cls):
             rec = cluster(data, c["index"])
             level0 = rec["own"] == NONE
@@ -769,12 +804,13 @@ def test_mark_over_seven_is_rejected(baked):
     assert "open-edge mark 8" in proc.stdout, proc.stdout
 
 
-@pytest.mark.parametrize("which", ["planes0", "planes5", "targets5", "reserved"])
+@pytest.mark.parametrize("which", ["planes0", "planes5", "targets5", "far5", "reserved"])
 def test_bad_preamble_is_rejected(baked, which):
     def edit(streams):
         planes, targets = streams[0][0], streams[0][1]
         streams[0] = {"planes0": bytes([0, targets, 0, 0]), "planes5": bytes([5, targets, 0, 0]),
-                      "targets5": bytes([planes, 5, 0, 0]), "reserved": bytes([planes, targets, 1, 0])}[which]
+                      "targets5": bytes([planes, 5, 0, 0]), "far5": bytes([planes, targets, 5, 0]),
+                      "reserved": bytes([planes, targets, 0, 1])}[which]
     proc = edit_streams(baked, "sphere", f"preamble-{which}", edit)
     assert_caught(proc, "page_encoding")
     assert "preamble" in proc.stdout, proc.stdout
@@ -807,10 +843,10 @@ def test_bad_copy_target_is_rejected(baked, which):
 
 def test_bad_reference_flag_is_rejected(baked):
     def edit(streams):
-        streams[4] = bytes([2]) + streams[4][1:]
-    proc = edit_streams(baked, "sphere", "flag2", edit)
+        streams[4] = bytes([3]) + streams[4][1:]
+    proc = edit_streams(baked, "sphere", "flag3", edit)
     assert_caught(proc, "page_encoding")
-    assert "reference flag 2" in proc.stdout, proc.stdout
+    assert "reference flag 3" in proc.stdout, proc.stdout
 
 
 def test_short_encoding_is_rejected(baked):
@@ -838,7 +874,8 @@ def test_index_codec_garbage_is_rejected(baked):
     assert "index codec" in proc.stdout, proc.stdout
 
 
-@pytest.mark.parametrize("version, why", [(1, "no open-edge marks"), (2, "re-bake"), (3, "re-bake")])
+@pytest.mark.parametrize("version, why", [(1, "no open-edge marks"), (2, "re-bake"), (3, "re-bake"),
+                                          (4, "re-bake")])
 def test_an_older_version_is_rejected_with_a_clear_message(baked, version, why):
     def mutate(data):
         data[4] = version
@@ -846,3 +883,70 @@ def test_an_older_version_is_rejected_with_a_clear_message(baked, version, why):
     proc = run_on(baked, "sphere", f"v{version}", mutate)
     assert_caught(proc, "bad_version")
     assert f"version {version}" in proc.stdout and why in proc.stdout, proc.stdout
+
+
+def far_copies(data, p):
+    """(encoded bytes, offset of the far target planes, far copies G, planes F)
+    of page p (§4.3)."""
+    rec = page(data, p)
+    cls = [cluster(data, rec["first"] + i) for i in range(rec["count"])]
+    enc = bytearray(page_encoded(data, p))
+    n, V, T = len(cls), sum(c["vc"] for c in cls), sum(c["tc"] for c in cls)
+    lengths = struct.unpack_from(f"<{n}H", enc, 4)
+    refs_at = 4 + 2 * n + sum(lengths) + T
+    refs = enc[refs_at:refs_at + V]
+    return enc, refs_at + V + enc[1] * refs.count(1), refs.count(2), enc[2]
+
+
+@pytest.fixture(scope="module")
+def paged(tmp_path_factory):
+    """A file of several pages (the small ones above fit in one): (directory,
+    {"sphere": path})."""
+    if not MRES.exists() or not BAKE_ALL.exists():
+        pytest.skip("Rust tools not built: cargo build --release -p mres-cli")
+    d = tmp_path_factory.mktemp("paged")
+    subprocess.run([str(MRES), "generate", "sphere", "48", "-o", str(d / "sphere.obj")], check=True,
+                   capture_output=True)
+    subprocess.run([str(BAKE_ALL), str(d / "sphere.obj"), "-o", str(d / "out"), "-j", "1"], check=True,
+                   capture_output=True)
+    f = d / "out" / "sphere.mres"
+    assert header(f.read_bytes())["P"] >= 3, f"{f}: fewer than 3 pages"
+    return d, {"sphere": f}
+
+
+def test_the_finest_page_copies_from_its_sources(paged):
+    """Far copies are exercised: the finest page copies vertices from the
+    coarser pages it depends on, and the file passes."""
+    data = bytearray(paged[1]["sphere"].read_bytes())
+    p = header(data)["P"] - 1
+    _, _, G, F = far_copies(data, p)
+    assert G > 0 and F >= 1 and page_sources(data, p), f"page {p} has no far copies"
+    proc = run_checker(paged[1]["sphere"], *FAST)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_far_target_before_the_sources_is_rejected(paged):
+    """The first far copy of the finest page names source vertex -1: the
+    lengths still match, the target does not."""
+    def mutate(data):
+        p = header(data)["P"] - 1
+        enc, at, G, F = far_copies(data, p)
+        for k in range(F):
+            enc[at + k * G] = 1 if k == 0 else 0  # zigzag(-1) = 1
+        store_page(data, p, zstandard.ZstdCompressor(level=3).compress(bytes(enc)))
+    proc = run_on(paged, "sphere", "far-before", mutate)
+    assert_caught(proc, "page_encoding")
+    assert "copies source vertex -1" in proc.stdout, proc.stdout
+
+
+def test_a_page_whose_source_fails_is_reported(paged):
+    """A source page that does not decode: the pages copying from it are
+    reported too, not decoded from nothing."""
+    def mutate(data):
+        last = header(data)["P"] - 1
+        q = page_sources(data, last)[0]
+        rec = page(data, q)
+        data[rec["offset"]] ^= 0xFF
+    proc = run_checker(corrupted(paged, "sphere", "source-fails", mutate), *FAST)
+    assert_caught(proc, "page_checksum")
+    assert "did not decode" in proc.stdout, proc.stdout
