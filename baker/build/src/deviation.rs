@@ -382,21 +382,23 @@ fn measure(
         let p = mesh.positions[v as usize];
         [p[0] - center[0], p[1] - center[1], p[2] - center[2]]
     };
+    // In parallel: at the top levels the input is every level-0 triangle, in one group.
     let triangles = |indices: &[u32]| -> Vec<Triangle<f32>> {
-        indices.chunks_exact(3).map(|t| [local(t[0]), local(t[1]), local(t[2])]).collect()
+        indices.par_chunks_exact(3).map(|t| [local(t[0]), local(t[1]), local(t[2])]).collect()
     };
     let (input_tris, output_tris) = (triangles(input), triangles(output));
     let (mut input_duty, output_duty) = duties(mesh, input, output, triangle_errors, sides.owned.is_some());
     // Per input triangle, a distance added to its samples' (see `Sides::small`).
     let mut reach_of = vec![0.0f32; input_tris.len()];
     if let Some(owned) = sides.owned {
-        for ((d, o), (tri, r)) in input_duty.iter_mut().zip(owned).zip(input_tris.iter().zip(&mut reach_of)) {
+        let duty_reach = input_duty.par_iter_mut().zip(&mut reach_of);
+        duty_reach.zip(owned).zip(&input_tris).for_each(|(((d, r), o), tri)| {
             *d &= o;
             let radius = radius(tri);
             if *d != 0 && (radius as f64) <= sides.small {
                 (*d, *r) = (CENTROID, radius);
             }
-        }
+        });
     }
 
     let limits = Limits { slack, hot2: hot_above.map(|h| (h * h) as f32) };

@@ -53,9 +53,11 @@ struct Child {
 /// position-id keys: the original's odd edges) are marked once each.
 pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64]) -> Vec<BuiltCluster> {
     let clusters = level0_clusters(mesh, settings);
-    let marks = open::mark(mesh, &clusters, open);
-    let samples = first_samples(mesh, &clusters);
-    let codes = triangle_codes(mesh, &clusters);
+    // Three serial passes over every triangle, independent of each other: side by side.
+    let (marks, (samples, codes)) = rayon::join(
+        || open::mark(mesh, &clusters, open),
+        || rayon::join(|| first_samples(mesh, &clusters), || triangle_codes(mesh, &clusters)),
+    );
     clusters
         .into_par_iter()
         .zip(marks)
@@ -136,13 +138,13 @@ impl<'a> Builder<'a> {
     /// A builder whose pending clusters are `clusters` (triangles into `mesh`); new groups
     /// start at `level`.
     pub fn new(mesh: &'a WeldedMesh, settings: &'a BakeSettings, clusters: Vec<BuiltCluster>, level: u32) -> Self {
-        let always_locked = always_locked(mesh, &clusters);
-        let part_size = match settings.error_bound {
-            ErrorBound::Measured => part_sizes(mesh),
-            ErrorBound::Simplifier => Vec::new(),
-        };
         let from_level0 = clusters.iter().all(|c| c.own_group == NO_GROUP && !c.owned.is_empty());
-        let original = (settings.error_bound == ErrorBound::Measured && from_level0).then(|| Original::new(mesh));
+        let measured = settings.error_bound == ErrorBound::Measured;
+        // Independent passes over the whole mesh, two of them serial: side by side.
+        let (original, (always_locked, part_size)) = rayon::join(
+            || (measured && from_level0).then(|| Original::new(mesh)),
+            || rayon::join(|| always_locked(mesh, &clusters), || if measured { part_sizes(mesh) } else { Vec::new() }),
+        );
         let pending = (0..clusters.len()).collect();
         let stats = BuildStats::default();
         Builder {
