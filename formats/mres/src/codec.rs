@@ -501,7 +501,7 @@ pub(crate) fn encode_page(clusters: &[Quantized], flags: u32, sources: &SourceIn
     let mut materials = Vec::new();
     let mut anchors = (<[i32; 3]>::default(), <[u16; 2]>::default(), <[u16; 2]>::default());
     // Each distinct vertex → its latest place in the page's decoding order.
-    let mut latest: std::collections::HashMap<VertexKey, usize> = std::collections::HashMap::new();
+    let mut latest: rustc_hash::FxHashMap<VertexKey, usize> = rustc_hash::FxHashMap::default();
     let (mut references, mut targets, mut follow) = (Vec::new(), Vec::new(), Targets::new());
     let (mut far, mut follow_far) = (Vec::new(), Targets::new());
     for c in clusters {
