@@ -7,6 +7,7 @@ use super::decode;
 use super::records::{meta_checksum, ClusterHeader, ClusterRecord, GroupRecord, HeaderRecord, PageRecord};
 use super::*;
 use rayon::prelude::*;
+use std::sync::OnceLock;
 
 /// Why a [`Dag`] cannot be written.
 #[derive(Debug, thiserror::Error)]
@@ -225,6 +226,10 @@ fn compress_pages(
             last_use[s as usize] = last_use[s as usize].max(p);
         }
     }
+    // What later pages read of each source page, made once by the first page that needs it
+    // (a page is the source of its siblings' and children's pages, often several) and dropped
+    // with the page's data.
+    let mut kept: Vec<OnceLock<SourceData>> = (0..pages.len()).map(|_| OnceLock::new()).collect();
     let mut frames = Vec::with_capacity(pages.len());
     let mut freed = 0;
     for start in (0..pages.len()).step_by(PAGE_BATCH) {
@@ -234,7 +239,10 @@ fn compress_pages(
             .into_par_iter()
             .map(|p| {
                 let of = |p: usize| -> Vec<&EncodedCluster> { members(p).iter().map(|&c| &encoded[c]).collect() };
-                let source_pages: Vec<Vec<&EncodedCluster>> = sources[p].iter().map(|&s| of(s as usize)).collect();
+                let source_pages: Vec<&SourceData> = sources[p]
+                    .iter()
+                    .map(|&s| kept[s as usize].get_or_init(|| SourceData::new(&of(s as usize), header.flags)))
+                    .collect();
                 compress_page(&of(p), &source_pages, header, level)
             })
             .collect::<Result<_, _>>()?;
@@ -251,6 +259,7 @@ fn compress_pages(
             for &c in members(p) {
                 encoded[c].data = Box::default();
             }
+            kept[p] = OnceLock::new();
         }
         while freed < batch.end && last_use[freed] < batch.end {
             freed += 1;
@@ -351,19 +360,18 @@ impl Layout {
 /// so that each gets its own entropy tables (the low bytes of residuals are near-random, the
 /// high ones nearly all zero). The encoding is decoded again and must give back the page's GPU
 /// layout byte for byte: a writer bug is an error here, never a file that reads differently.
-/// `sources` are the clusters of the page's sources, page by page (FORMAT.md §4.3): their
-/// vertices, numbered from their own blocks, are what far copies name, and their laid-out
-/// pages what the check decodes them from.
+/// `sources` are the page's sources, in order (FORMAT.md §4.3): their vertices are what far
+/// copies name, and their laid-out pages what the check decodes them from.
 fn compress_page(
     clusters: &[&EncodedCluster],
-    sources: &[Vec<&EncodedCluster>],
+    sources: &[&SourceData],
     header: &Header,
     level: i32,
 ) -> Result<Vec<u8>, WriteError> {
     let (raw, _) = assemble_page(clusters);
     let quantized: Vec<Quantized> = clusters.iter().map(|c| c.quantized(header.flags)).collect();
-    let source_clusters: Vec<Quantized> = sources.iter().flatten().map(|c| c.quantized(header.flags)).collect();
-    let index = codec::SourceIndex::new(&codec::source_keys(&source_clusters));
+    let keys: Vec<codec::VertexKey> = sources.iter().flat_map(|s| s.keys.iter().copied()).collect();
+    let index = codec::SourceIndex::new(&keys);
     let codec_bug = || WriteError::BadDag("the page encoding does not decode to the page (a writer bug)".into());
     let streams = codec::encode_page(&quantized, header.flags, &index).ok_or_else(codec_bug)?;
     let encoded = streams.concat();
@@ -374,16 +382,13 @@ fn compress_page(
         )));
     }
     let records = page_records(clusters);
-    // The sources as a reader holds them: their laid-out pages and cluster records.
-    let source_layouts: Vec<(Vec<u8>, Vec<ClusterInfo>)> = if streams[0][2] == 0 {
-        Vec::new() // no far copies: the decoder reads no source
-    } else {
-        sources.iter().map(|s| (assemble_page(s).0, page_records(s))).collect()
-    };
-    let source_pages: Vec<decode::SourcePage> = source_layouts
+    // The sources as a reader holds them: their laid-out pages and cluster records (none
+    // without far copies: the decoder then reads no source).
+    let read: &[&SourceData] = if streams[0][2] != 0 { sources } else { &[] };
+    let source_pages: Vec<decode::SourcePage> = read
         .iter()
         .enumerate()
-        .map(|(i, (layout, records))| decode::SourcePage { index: i as u32, layout, records })
+        .map(|(i, s)| decode::SourcePage { index: i as u32, layout: &s.layout, records: &s.records })
         .collect();
     let decoded =
         decode::decode_page_gpu(&encoded, &records, header.flags, header.normal_bits, raw.len(), Some(&source_pages));
@@ -395,6 +400,25 @@ fn compress_page(
         out.extend_from_slice(&zstd::bulk::compress(stream, level)?);
     }
     Ok(out)
+}
+
+/// What the pages that copy vertices of a page read of it (FORMAT.md §4.3): its vertices'
+/// keys in source numbering, and its GPU layout and cluster records, as a reader holds them.
+struct SourceData {
+    keys: Vec<codec::VertexKey>,
+    layout: Vec<u8>,
+    records: Vec<ClusterInfo>,
+}
+
+impl SourceData {
+    fn new(clusters: &[&EncodedCluster], flags: u32) -> SourceData {
+        let quantized: Vec<Quantized> = clusters.iter().map(|c| c.quantized(flags)).collect();
+        SourceData {
+            keys: codec::source_keys(&quantized),
+            layout: assemble_page(clusters).0,
+            records: page_records(clusters),
+        }
+    }
 }
 
 /// The cluster records of a page of these clusters, as far as decoding reads them (counts,
