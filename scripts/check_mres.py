@@ -944,7 +944,7 @@ class Checker:
         r, C, P = self.r, self.C, self.P
         t = time.perf_counter()
         self.page_decoded = np.zeros(P, dtype=bool)
-        decoded = [None] * P  # per page, its clusters as decoded (for the pages that copy from it)
+        decoded = [None] * P  # per page, its vertices in source numbering (for the pages that copy from it)
         chunks = []
         base = np.zeros(P, dtype=np.int64)
         hdr = np.zeros(C, dtype=CHDR_DT)
@@ -980,7 +980,7 @@ class Checker:
                 r.violation("page_encoding", f"page {p}: its source page {missing[0]} (an earlier dependency it may "
                                              "copy vertices from) did not decode")
                 continue
-            source_list = [v for q in sources for v in source_vertices(decoded[q])]
+            source_list = [v for q in sources for v in decoded[q]]
             try:
                 clusters = decode_encoded_page(enc, vcs, tcs, self.flags, source_list)
                 raw = gpu_layout(clusters, self.flags)
@@ -998,7 +998,7 @@ class Checker:
             hdr[first:first + n] = np.frombuffer(raw, CHDR_DT, count=n)
             have_hdr[first:first + n] = True
             self.page_decoded[p] = True
-            decoded[p] = clusters
+            decoded[p] = source_vertices(clusters)
             base[p] = pos
             pad = (-len(raw)) % 4
             chunks.append(raw)
