@@ -311,8 +311,8 @@ pub fn measure(built: Built, input: &Surface, max_samples: usize) -> BuilderRun 
 /// error, triangles) cut points: on the lower envelope of the points (sorted by error, each
 /// kept only if it has fewer triangles than every finer one), interpolated log-log between
 /// the two envelope points that bracket `target` — the count of the finer one where its
-/// error is below [`EXACT_BELOW`] (an exact cut: no curve to follow from it). `None` where no cut is that accurate; the coarsest envelope
-/// point's count beyond the coarsest cut. Monotone: never more triangles for a larger target.
+/// error is below [`EXACT_BELOW`] (an exact cut: no curve to follow from it). `None` where no
+/// cut is that accurate; the coarsest envelope point's count beyond the coarsest cut. Monotone: never more triangles for a larger target.
 pub fn triangles_at(points: &[(f64, u64)], target: f64) -> Option<f64> {
     let mut sorted: Vec<(f64, u64)> = points.iter().copied().filter(|p| p.0.is_finite()).collect();
     sorted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
