@@ -419,7 +419,8 @@ fn measure(
             for p in samples(tri, duty) {
                 let d = ((worst / SAMPLING_MARGIN - o.slack).max(0.0)) as f32;
                 let enough = hot2.map_or(d * d, |h| h.min(d * d));
-                let (d2, nearest) = o.bvh.nearest_squared(&o.tris, p, enough, hint);
+                // Which triangle within `enough` does not matter here, only a distance beyond.
+                let (d2, nearest) = o.bvh.within_squared(&o.tris, p, enough, hint);
                 hint = nearest;
                 if d2 > enough {
                     worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + o.slack));

@@ -60,6 +60,9 @@ pub struct Bvh<T = f64> {
     order: Vec<u32>,
     /// Per triangle, the leaf that holds it (for queries that start from a hint).
     leaf_of: Vec<u32>,
+    /// Per node, its parent (the root's is 0). Children come in pairs at an odd index and the
+    /// next one, so a node's sibling is found from its index alone.
+    parent: Vec<u32>,
 }
 
 struct Node<T> {
@@ -80,6 +83,7 @@ impl<T: Real> Bvh<T> {
         let centroids: Vec<[T; 3]> = tris.iter().map(|v| [0, 1, 2].map(|k| v[0][k] + v[1][k] + v[2][k])).collect();
         let empty = Node { lo: [T::ZERO; 3], hi: [T::ZERO; 3], start: 0, count: 0 };
         let mut nodes = vec![empty];
+        let mut parent = vec![0u32];
         let mut stack = vec![(0usize, 0usize, tris.len())];
         while let Some((node, start, end)) = stack.pop() {
             let (mut lo, mut hi) = ([T::INFINITY; 3], [T::NEG_INFINITY; 3]);
@@ -123,11 +127,12 @@ impl<T: Real> Bvh<T> {
             let child = nodes.len();
             nodes.push(Node { lo, hi, start: 0, count: 0 });
             nodes.push(Node { lo, hi, start: 0, count: 0 });
+            parent.extend([node as u32; 2]);
             nodes[node].start = child as u32;
             stack.push((child, start, mid));
             stack.push((child + 1, mid, end));
         }
-        Bvh { nodes, order, leaf_of }
+        Bvh { nodes, order, leaf_of, parent }
     }
 
     /// Distance from `p` to the nearest of `tris` (infinite when there are none).
@@ -150,29 +155,73 @@ impl<T: Real> Bvh<T> {
 
     /// Squared distance form of [`Bvh::nearest_beyond`] that first tries the leaf holding
     /// triangle `hint` (neighbouring query points are near the same triangles); `usize::MAX`
-    /// for no hint.
+    /// for no hint. Past the hint's leaf it descends from the root, nearer child first, so
+    /// that the triangle it stops at is near `p` among those within `enough2`: the baker hands
+    /// a sample to the cluster of that triangle, and a nearer one keeps the next level's
+    /// errors tight.
     pub fn nearest_squared(&self, tris: &[Triangle<T>], p: [T; 3], enough2: T, hint: usize) -> (T, usize) {
         let mut best = (T::INFINITY, 0usize);
-        if self.order.is_empty() {
+        let Some(leaf) = self.try_hint(tris, p, enough2, hint, &mut best) else { return best };
+        self.search(tris, 0, leaf, p, enough2, &mut stack(), &mut best);
+        best
+    }
+
+    /// Like [`Bvh::nearest_squared`], but past the hint's leaf it climbs towards the root,
+    /// searching each ancestor's other child: the triangles next to the hint come first, so a
+    /// query that stops at any triangle within `enough2` visits a few nodes near its hint
+    /// instead of descending from the root. For callers that need only the distance where it
+    /// exceeds `enough2` (then the result is the nearest triangle, as for `nearest_squared`:
+    /// the siblings along the path cover every other leaf once), not which triangle within it.
+    pub fn within_squared(&self, tris: &[Triangle<T>], p: [T; 3], enough2: T, hint: usize) -> (T, usize) {
+        let mut best = (T::INFINITY, 0usize);
+        let Some(leaf) = self.try_hint(tris, p, enough2, hint, &mut best) else { return best };
+        if leaf == NO_NODE {
+            self.search(tris, 0, NO_NODE, p, enough2, &mut stack(), &mut best);
             return best;
         }
-        let mut skip = u32::MAX;
-        if let Some(&leaf) = self.leaf_of.get(hint) {
-            let d = point_triangle_distance2(p, &tris[hint]);
-            best = (d, hint);
-            // The hint itself cannot improve on `best` again: pass it as done.
-            if d <= enough2 || self.leaf(tris, leaf, p, enough2, hint, &mut best) {
-                return best;
+        let (mut node, mut stack) = (leaf, stack());
+        while node != 0 {
+            let sibling = if node % 2 == 1 { node + 1 } else { node - 1 };
+            if self.search(tris, sibling, NO_NODE, p, enough2, &mut stack, &mut best) {
+                break;
             }
-            skip = leaf;
+            node = self.parent[node as usize];
         }
-        // Nodes to visit with their box distance, computed once when pushed; a node at least
-        // as far as `best` cannot hold a nearer triangle (`best` only shrinks), so it is not
-        // pushed. The median split halves every node, so the depth is below 32 for any u32
-        // triangle count, and the stack holds at most one entry per level plus one: 64 cover
-        // every tree (and it is set up on every query that gets this far).
-        let mut stack = [(0u32, T::ZERO); 64];
-        stack[0] = (0, box_distance2(&self.nodes[0], p));
+        best
+    }
+
+    /// Tests triangle `hint` and the rest of its leaf against `best`. `None` when the query is
+    /// done (nothing to search, or a triangle within `enough2` found); else the hint's leaf,
+    /// which the search skips, or [`NO_NODE`] without a hint.
+    fn try_hint(&self, tris: &[Triangle<T>], p: [T; 3], enough2: T, hint: usize, best: &mut (T, usize)) -> Option<u32> {
+        if self.order.is_empty() {
+            return None;
+        }
+        let Some(&leaf) = self.leaf_of.get(hint) else { return Some(NO_NODE) };
+        let d = point_triangle_distance2(p, &tris[hint]);
+        *best = (d, hint);
+        // The hint itself cannot improve on `best` again: pass it as done.
+        if d <= enough2 || self.leaf(tris, leaf, p, enough2, hint, best) {
+            return None;
+        }
+        Some(leaf)
+    }
+
+    /// Searches the subtree at `root` but node `skip` for triangles nearer than `best`, nearer
+    /// child first; true once one is within `enough2`. A node at least as far as `best` cannot
+    /// hold a nearer triangle (`best` only shrinks), so it is not pushed.
+    #[allow(clippy::too_many_arguments)]
+    fn search(
+        &self,
+        tris: &[Triangle<T>],
+        root: u32,
+        skip: u32,
+        p: [T; 3],
+        enough2: T,
+        stack: &mut [(u32, T); 64],
+        best: &mut (T, usize),
+    ) -> bool {
+        stack[0] = (root, box_distance2(&self.nodes[root as usize], p));
         let mut top = 1usize;
         while top > 0 {
             top -= 1;
@@ -182,8 +231,8 @@ impl<T: Real> Bvh<T> {
             }
             let n = &self.nodes[index as usize];
             if n.count > 0 {
-                if self.leaf(tris, index, p, enough2, usize::MAX, &mut best) {
-                    return best;
+                if self.leaf(tris, index, p, enough2, usize::MAX, best) {
+                    return true;
                 }
             } else if top + 2 <= stack.len() {
                 let (a, b) = (n.start, n.start + 1);
@@ -199,7 +248,7 @@ impl<T: Real> Bvh<T> {
                 }
             }
         }
-        best
+        false
     }
 
     /// Tests the triangles of leaf `index` but `done` against `best` (squared distance,
@@ -229,6 +278,17 @@ impl<T: Real> Bvh<T> {
         }
         false
     }
+}
+
+/// No node: a query without a hint skips none.
+const NO_NODE: u32 = u32::MAX;
+
+/// A query's stack of nodes to visit, each with its box distance, computed once when pushed.
+/// The median split halves every node, so the depth is below 32 for any u32 triangle count,
+/// and a subtree's search holds at most one entry per level plus one: 64 cover every tree.
+/// (Set up only by queries that get past their hint.)
+fn stack<T: Real>() -> [(u32, T); 64] {
+    [(0u32, T::ZERO); 64]
 }
 
 /// The bounding box of triangle `t`.
@@ -348,11 +408,13 @@ mod tests {
             let p = t[1].map(|x| x * 1.2 - 0.1);
             let exact = tris.iter().map(|t| point_triangle_distance2(p, t)).fold(f32::INFINITY, f32::min);
             for hint in [usize::MAX, i, 499] {
-                let (d2, t) = bvh.nearest_squared(&tris, p, 0.0, hint);
-                assert!(d2 == exact && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {exact}");
-                let enough2 = exact * 4.0;
-                let (d2, t) = bvh.nearest_squared(&tris, p, enough2, hint);
-                assert!(d2 <= enough2 && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {enough2}");
+                for query in [Bvh::nearest_squared, Bvh::within_squared] {
+                    let (d2, t) = query(&bvh, &tris, p, 0.0, hint);
+                    assert!(d2 == exact && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {exact}");
+                    let enough2 = exact * 4.0;
+                    let (d2, t) = query(&bvh, &tris, p, enough2, hint);
+                    assert!(d2 <= enough2 && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {enough2}");
+                }
             }
         }
     }
