@@ -15,7 +15,7 @@
 //! with their worst spots locked ([`simplify_measured`]).
 
 use crate::settings::BakeSettings;
-use crate::simplify::{simplify_group, Simplified};
+use crate::simplify::{simplify_group, Locks, Simplified};
 use crate::weld::WeldedMesh;
 use mres_geom::bvh::{Bvh, Triangle};
 use mres_geom::edges::edge_key;
@@ -86,7 +86,7 @@ pub fn simplify_measured(
     input: &[u32],
     masks: &[u8],
     reference: &Reference,
-    locked: impl Fn(u32) -> bool,
+    locks: &Locks,
     settings: &BakeSettings,
     part_size: &[f32],
 ) -> Option<Measured> {
@@ -98,7 +98,7 @@ pub fn simplify_measured(
             measure(mesh, &sides, &s.indices, part_size, s.error as f64, hot_above, reference.original);
         (stored(total, s.error).max(members), hot, found)
     };
-    let mut best = simplify_group(mesh, input, masks, &locked, settings, reference.lenient)?;
+    let mut best = simplify_group(mesh, input, masks, locks, settings, reference.lenient)?;
     let (mut error, _, mut found) = error_of(&best, None);
     let mut extra: Vec<u32> = Vec::new();
     for _ in 0..OUTLIER_RETRIES {
@@ -117,8 +117,9 @@ pub fn simplify_measured(
             break;
         }
         let id = |v: u32| mesh.position_ids[v as usize];
-        let lock = |v: u32| locked(v) || extra.binary_search(&id(v)).is_ok();
-        let Some(retry) = simplify_group(mesh, input, masks, lock, settings, reference.lenient) else { break };
+        let lock = |v: u32| (locks.vertex)(v) || extra.binary_search(&id(v)).is_ok();
+        let retry_locks = Locks { vertex: &lock, chord: locks.chord };
+        let Some(retry) = simplify_group(mesh, input, masks, &retry_locks, settings, reference.lenient) else { break };
         let (e, _, f) = error_of(&retry, None);
         if e >= error {
             break;

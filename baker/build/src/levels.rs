@@ -5,6 +5,7 @@
 //! The result is independent of the rayon thread count: groups are simplified in parallel but
 //! collected in partition order.
 
+use crate::chords::{self, Chords};
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopCluster, LOCAL};
 use crate::deviation::{assign_owned, merge_owned, part_sizes, simplify_measured, Original, Owned, Reference};
@@ -13,7 +14,7 @@ use crate::open;
 use crate::partition::{cluster_graph, partition};
 use crate::progress::Progress;
 use crate::settings::{BakeSettings, ErrorBound};
-use crate::simplify::{simplify_group, Method};
+use crate::simplify::{simplify_group, Locks, Method};
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
 use mres_geom::edges::edge_keys;
@@ -31,6 +32,8 @@ const NON_MANIFOLD: u8 = 2;
 /// A stuck top of at most this many clusters is simplified as one group (the validator's
 /// largest group size, docs/INVARIANTS.md §3).
 const FORCED_GROUP_CLUSTERS: usize = 32;
+/// `owner` of a position used by two or more groups of a level.
+const SHARED: u32 = u32::MAX - 1;
 /// Safety stop on the number of levels.
 const MAX_LEVELS: u32 = 64;
 
@@ -39,6 +42,8 @@ struct Simplified {
     children: Vec<Child>,
     error: f32,
     method: Method,
+    /// The chords it added (see [`crate::chords`]).
+    chords: Vec<u64>,
 }
 
 /// One parent cluster of a simplified group: triangles, open-border marks, owned level-0
@@ -204,92 +209,108 @@ impl<'a> Builder<'a> {
     /// Simplifies each part (a group of pending clusters, whose triangles are `refs`) in
     /// parallel, with the positions it shares with other parts locked; `None` where stuck.
     /// `lock` selects which [`always_locked`] reasons hold (the cell border always does).
+    /// Two rounds, for the chords between locked positions (see [`crate::chords`]).
     fn simplify_parts(&self, parts: &[Vec<u32>], refs: &[&[u32]], lock: u8) -> Vec<Option<Simplified>> {
-        let (mesh, settings) = (self.mesh, self.settings);
+        let mesh = self.mesh;
         // Which group uses each position; positions used by two groups are locked.
         let mut owner = vec![u32::MAX; mesh.position_count];
         for (g, part) in parts.iter().enumerate() {
             for &c in part {
                 for &v in refs[c as usize] {
                     let o = &mut owner[mesh.position_ids[v as usize] as usize];
-                    *o = if *o == u32::MAX || *o == g as u32 { g as u32 } else { u32::MAX - 1 };
+                    *o = if *o == u32::MAX || *o == g as u32 { g as u32 } else { SHARED };
                 }
             }
         }
         let always_locked = &self.always_locked;
+        let kept = |p: u32| always_locked[p as usize] & (CELL_BORDER | lock) != 0;
         let locked = |v: u32| {
-            let p = mesh.position_ids[v as usize] as usize;
-            owner[p] == u32::MAX - 1 || always_locked[p] & (CELL_BORDER | lock) != 0
+            let p = mesh.position_ids[v as usize];
+            owner[p as usize] == SHARED || kept(p)
         };
-        let part_size = &self.part_size;
-        let lenient = lock == 0;
-        let clusters = &self.clusters;
-        let pending = &self.pending;
-        parts
-            .par_iter()
-            .map(|part| {
-                let members = || part.iter().map(|&c| &clusters[pending[c as usize]]);
-                let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
-                let masks: Vec<u8> = members().flat_map(|m| m.open.iter().copied()).collect();
-                let members_error = members().map(|m| m.own_error).fold(0.0, f32::max);
-                let owned = match settings.error_bound {
-                    ErrorBound::Measured => merge_owned(members().flat_map(|m| m.owned.iter().copied())),
-                    ErrorBound::Simplifier => Vec::new(),
-                };
-                let (s, error, found) = match settings.error_bound {
-                    ErrorBound::Measured => {
-                        let reference = if owned.is_empty() {
-                            // Against the members, each with its own error (a later shard stage).
-                            let errors = members().flat_map(|m| std::iter::repeat_n(m.own_error, m.indices.len() / 3));
-                            let triangles = Cow::Borrowed(merged.as_slice());
-                            Reference {
-                                triangles,
-                                errors: errors.collect(),
-                                samples: None,
-                                members_error,
-                                original: None,
-                                lenient,
-                            }
-                        } else {
-                            // Against the original surface under the group: nothing adds up.
-                            let errors = vec![0.0; owned.len()];
-                            let samples = Some(owned.iter().map(|o| o.2).collect());
-                            let triangles: Vec<u32> = owned.iter().flat_map(|o| o.1).collect();
-                            let original = self.original.as_ref();
-                            Reference {
-                                triangles: Cow::Owned(triangles),
-                                errors,
-                                samples,
-                                members_error,
-                                original,
-                                lenient,
-                            }
-                        };
-                        let m = simplify_measured(mesh, &merged, &masks, &reference, locked, settings, part_size)?;
-                        (m.simplified, m.error, m.found)
-                    }
-                    ErrorBound::Simplifier => {
-                        let s = simplify_group(mesh, &merged, &masks, locked, settings, lenient)?;
-                        let error = s.error;
-                        (s, error, Vec::new())
-                    }
-                };
-                let indices = split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings);
-                let open = open::mark(mesh, &indices, &s.needed);
-                let owned = if owned.is_empty() {
-                    vec![Vec::new(); indices.len()]
-                } else {
-                    assign_owned(mesh, &owned, (&s.indices, &found), &indices, error)
-                };
-                let children = indices
-                    .into_iter()
-                    .zip(open)
-                    .zip(owned)
-                    .map(|((indices, open), owned)| Child { indices, open, owned })
-                    .collect();
-                Some(Simplified { children, error, method: s.method })
+        let chords = Chords::new(parts, refs, &mesh.position_ids, |p| owner[p as usize] == SHARED);
+        let free = |e: u64| chords.free(e, kept);
+        let first = Locks { vertex: &locked, chord: &free };
+        let mut results: Vec<Option<Simplified>> =
+            parts.par_iter().map(|part| self.simplify_part(part, refs, &first, lock)).collect();
+        let added: Vec<Option<&[u64]>> = results.iter().map(|r| r.as_ref().map(|s| s.chords.as_slice())).collect();
+        let again: Vec<(usize, Option<Simplified>)> = chords::conflicted(&added)
+            .into_par_iter()
+            .map(|g| {
+                let unshared = |e: u64| chords.unshared(g as u32, e, kept);
+                let locks = Locks { vertex: &locked, chord: &unshared };
+                (g, self.simplify_part(&parts[g], refs, &locks, lock))
             })
-            .collect()
+            .collect();
+        for (g, result) in again {
+            results[g] = result;
+        }
+        results
+    }
+
+    /// Simplifies one part (see [`Builder::simplify_parts`]) with `locks`; `None` where stuck.
+    fn simplify_part(&self, part: &[u32], refs: &[&[u32]], locks: &Locks, lock: u8) -> Option<Simplified> {
+        let (mesh, settings) = (self.mesh, self.settings);
+        let (part_size, lenient) = (&self.part_size, lock == 0);
+        let (clusters, pending) = (&self.clusters, &self.pending);
+        let members = || part.iter().map(|&c| &clusters[pending[c as usize]]);
+        let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
+        let masks: Vec<u8> = members().flat_map(|m| m.open.iter().copied()).collect();
+        let members_error = members().map(|m| m.own_error).fold(0.0, f32::max);
+        let owned = match settings.error_bound {
+            ErrorBound::Measured => merge_owned(members().flat_map(|m| m.owned.iter().copied())),
+            ErrorBound::Simplifier => Vec::new(),
+        };
+        let (s, error, found) = match settings.error_bound {
+            ErrorBound::Measured => {
+                let reference = self.reference(part, &merged, &owned, members_error, lenient);
+                let m = simplify_measured(mesh, &merged, &masks, &reference, locks, settings, part_size)?;
+                (m.simplified, m.error, m.found)
+            }
+            ErrorBound::Simplifier => {
+                let s = simplify_group(mesh, &merged, &masks, locks, settings, lenient)?;
+                let error = s.error;
+                (s, error, Vec::new())
+            }
+        };
+        let indices = split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings);
+        let open = open::mark(mesh, &indices, &s.needed);
+        let owned = if owned.is_empty() {
+            vec![Vec::new(); indices.len()]
+        } else {
+            assign_owned(mesh, &owned, (&s.indices, &found), &indices, error)
+        };
+        let children = indices
+            .into_iter()
+            .zip(open)
+            .zip(owned)
+            .map(|((indices, open), owned)| Child { indices, open, owned })
+            .collect();
+        Some(Simplified { children, error, method: s.method, chords: s.chords })
+    }
+
+    /// What a part's result is measured against: the level-0 triangles under it (`owned`,
+    /// errors 0: nothing adds up), or where those are not at hand (a later shard stage) its
+    /// members' triangles (`merged`), each with its member's error.
+    fn reference<'r>(
+        &'r self,
+        part: &[u32],
+        merged: &'r [u32],
+        owned: &[Owned],
+        members_error: f32,
+        lenient: bool,
+    ) -> Reference<'r> {
+        if owned.is_empty() {
+            let members = part.iter().map(|&c| &self.clusters[self.pending[c as usize]]);
+            let errors = members.flat_map(|m| std::iter::repeat_n(m.own_error, m.indices.len() / 3)).collect();
+            let triangles = Cow::Borrowed(merged);
+            Reference { triangles, errors, samples: None, members_error, original: None, lenient }
+        } else {
+            let errors = vec![0.0; owned.len()];
+            let samples = Some(owned.iter().map(|o| o.2).collect());
+            let triangles = Cow::Owned(owned.iter().flat_map(|o| o.1).collect());
+            Reference { triangles, errors, samples, members_error, original: self.original.as_ref(), lenient }
+        }
     }
 
     /// Makes each simplified part a group whose children are pending next; a stuck part's
@@ -300,7 +321,7 @@ impl<'a> Builder<'a> {
         let mut progressed = false;
         for (part, result) in parts.iter().zip(results) {
             let members: Vec<usize> = part.iter().map(|&c| self.pending[c as usize]).collect();
-            let Some(Simplified { children, error, method }) = result else {
+            let Some(Simplified { children, error, method, .. }) = result else {
                 self.stats.stuck_groups += 1;
                 next.extend_from_slice(&members);
                 continue;

@@ -4,6 +4,7 @@
 #![deny(missing_docs)]
 
 pub mod bake;
+pub mod chords;
 pub mod cluster;
 pub mod dag;
 pub mod deviation;

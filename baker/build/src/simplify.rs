@@ -33,6 +33,18 @@ pub struct Simplified {
     pub method: Method,
     /// The output's edges that need an open-border mark, sorted (see [`crate::open`]).
     pub needed: Vec<u64>,
+    /// The output's new edges between two locked positions (chords, see [`crate::chords`]).
+    pub chords: Vec<u64>,
+}
+
+/// What a group's simplification must keep: the welded vertices it must not move, and which
+/// new edges between two locked positions (edge keys of position ids) it may add (see
+/// [`crate::chords`]).
+pub struct Locks<'a> {
+    /// Whether a welded vertex is locked.
+    pub vertex: &'a (dyn Fn(u32) -> bool + Sync),
+    /// Whether a new edge between two locked positions is allowed.
+    pub chord: &'a (dyn Fn(u64) -> bool + Sync),
 }
 
 /// The position ids of the `vertices` for which `locked` is true, sorted.
@@ -62,10 +74,11 @@ pub fn simplify_group(
     mesh: &WeldedMesh,
     indices: &[u32],
     masks: &[u8],
-    locked: impl Fn(u32) -> bool,
+    locks: &Locks,
     settings: &BakeSettings,
     lenient: bool,
 ) -> Option<Simplified> {
+    let locked = locks.vertex;
     // Compact the group's vertices so that each group works on a small, local vertex array.
     let mut vertices: Vec<u32> = indices.to_vec();
     vertices.sort_unstable();
@@ -87,7 +100,7 @@ pub fn simplify_group(
         limit: (triangles as f32 * settings.stuck_ratio) as usize,
         border: EdgeCounts {
             lenient,
-            ..EdgeCounts::new(mesh, indices, masks, &locked_positions(mesh, &vertices, &locked))
+            ..EdgeCounts::new(mesh, indices, masks, &locked_positions(mesh, &vertices, locked), locks.chord)
         },
     };
     for method in [Method::Regular, Method::Permissive, Method::Prune, Method::Sloppy] {
@@ -103,7 +116,7 @@ pub fn simplify_group(
                 break;
             }
             match group.border.check(mesh, &out) {
-                Ok(needed) => return Some(Simplified { indices: out, error, method, needed }),
+                Ok((needed, chords)) => return Some(Simplified { indices: out, error, method, needed, chords }),
                 Err(bad) => {
                     // Lock the offending edges' ends and their neighbours, and aim a little
                     // less low: such pinches come from the last collapses.
@@ -143,7 +156,7 @@ struct Group<'a> {
     weights: &'a [f32],
     /// Most triangles a result may keep and still count as progress.
     limit: usize,
-    border: EdgeCounts,
+    border: EdgeCounts<'a>,
 }
 
 impl Group<'_> {
@@ -199,13 +212,16 @@ impl Group<'_> {
 /// Edge use counts by position, to check that a simplified group keeps its border exactly
 /// and opens no hole inside: the local form of the crack-freedom invariant
 /// (docs/INVARIANTS.md §1), which also says which output edges need an open-border mark.
-struct EdgeCounts {
+struct EdgeCounts<'a> {
     /// Sorted (edge, uses, marked uses) of the group border: the input edges used an odd
     /// number of times unmarked (shared with another group, or a cell border) and every input
     /// edge between two locked positions (another group may use it too). Kept exactly.
     border: Vec<(u64, u32, u32)>,
-    /// Locked positions of the group, sorted: an output must not add an edge between two.
+    /// Locked positions of the group, sorted: an output must not add an edge between two
+    /// unless `chord` allows it.
     locked: Vec<u32>,
+    /// Whether the output may add this edge between two locked positions ([`Locks::chord`]).
+    chord: &'a (dyn Fn(u64) -> bool + Sync),
     /// Positions on a marked input edge, sorted: the only ones an open output edge may join
     /// (the simplifier moves open-border vertices along the border, never opens a hole).
     open: Vec<u32>,
@@ -221,10 +237,16 @@ fn ends(e: u64) -> [u32; 2] {
     [(e >> 32) as u32, e as u32]
 }
 
-impl EdgeCounts {
+impl<'a> EdgeCounts<'a> {
     /// The border of the group `indices` whose triangles carry `masks`; `locked` tells the
-    /// locked vertices.
-    fn new(mesh: &WeldedMesh, indices: &[u32], masks: &[u8], locked: &[u32]) -> EdgeCounts {
+    /// locked positions, `chord` which new edges between two of them are allowed.
+    fn new(
+        mesh: &WeldedMesh,
+        indices: &[u32],
+        masks: &[u8],
+        locked: &[u32],
+        chord: &'a (dyn Fn(u64) -> bool + Sync),
+    ) -> EdgeCounts<'a> {
         let keys = edge_keys(mesh, indices);
         let marked = open::marked_edges(mesh, indices, masks);
         let marks = |e: u64| open::count(&marked, e);
@@ -240,7 +262,7 @@ impl EdgeCounts {
         let mut open: Vec<u32> = marked.iter().flat_map(|&e| ends(e)).collect();
         open.sort_unstable();
         open.dedup();
-        EdgeCounts { border, locked: locked.to_vec(), open, lenient: false }
+        EdgeCounts { border, locked: locked.to_vec(), chord, open, lenient: false }
     }
 
     /// True when the group shares no edge or position with anything else (or is lenient).
@@ -248,12 +270,13 @@ impl EdgeCounts {
         self.lenient || (self.border.is_empty() && self.locked.is_empty())
     }
 
-    /// The output's edges that need a mark (sorted) if `out` uses every border edge as often
-    /// as the input and its other odd edges join open-border positions only; otherwise the
-    /// offending edges (including border edges it lost).
-    fn check(&self, mesh: &WeldedMesh, out: &[u32]) -> Result<Vec<u64>, Vec<u64>> {
+    /// The output's edges that need a mark and its chords (both sorted) if `out` uses every
+    /// border edge as often as the input, adds no edge between two locked positions that
+    /// `chord` refuses, and its other odd edges join open-border positions only; otherwise
+    /// the offending edges (including border edges it lost).
+    fn check(&self, mesh: &WeldedMesh, out: &[u32]) -> Result<(Vec<u64>, Vec<u64>), Vec<u64>> {
         let keys = edge_keys(mesh, out);
-        let (mut bad, mut needed) = (Vec::new(), Vec::new());
+        let (mut bad, mut needed, mut chords) = (Vec::new(), Vec::new(), Vec::new());
         let mut seen = vec![false; self.border.len()];
         let all = |set: &[u32], e: u64| ends(e).iter().all(|p| set.binary_search(p).is_ok());
         // Both lists are sorted: walk the border along the keys instead of searching it.
@@ -263,7 +286,16 @@ impl EdgeCounts {
             while next < self.border.len() && self.border[next].0 < e {
                 next += 1;
             }
-            match self.border.get(next).filter(|b| b.0 == e) {
+            let border = self.border.get(next).filter(|b| b.0 == e);
+            if border.is_none() && all(&self.locked, e) {
+                // A new edge between two locked positions (a chord).
+                if !(self.chord)(e) {
+                    bad.push(e);
+                    continue;
+                }
+                chords.push(e);
+            }
+            match border {
                 Some(&(_, uses, marks)) => {
                     seen[next] = true;
                     if uses != run.len() as u32 || marks > 1 {
@@ -272,7 +304,6 @@ impl EdgeCounts {
                         needed.push(e);
                     }
                 }
-                None if all(&self.locked, e) => bad.push(e),
                 // A group that shares nothing (an isolated part, or the whole top) may open
                 // any edge: no neighbour can crack, and the measured error sees a hole.
                 None if run.len() % 2 == 1 && (all(&self.open, e) || self.isolated()) => needed.push(e),
@@ -282,7 +313,7 @@ impl EdgeCounts {
         }
         bad.extend(self.border.iter().zip(&seen).filter(|(_, s)| !**s).map(|(e, _)| e.0));
         if bad.is_empty() {
-            Ok(needed)
+            Ok((needed, chords))
         } else {
             Err(bad)
         }
