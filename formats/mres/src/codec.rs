@@ -369,29 +369,6 @@ impl Targets {
     }
 }
 
-/// A stream of `planes` byte planes of `count` values read one value at a time (FORMAT.md
-/// §4.3, byte planes).
-pub(crate) struct PlaneReader<'a> {
-    /// The planes, one after the other.
-    pub bytes: &'a [u8],
-    /// How many planes.
-    pub planes: usize,
-    /// Values per plane.
-    pub count: usize,
-    /// The next value's index.
-    pub at: usize,
-}
-
-impl PlaneReader<'_> {
-    /// The next value; reading past the last gives 0 (the caller's counts prevent it).
-    pub(crate) fn next(&mut self) -> u32 {
-        let at = self.at;
-        self.at += 1;
-        (0..self.planes)
-            .fold(0u32, |acc, p| acc | (self.bytes.get(p * self.count + at).copied().unwrap_or(0) as u32) << (8 * p))
-    }
-}
-
 /// A cluster's triangles as meshoptimizer's index codec gives them back (the same triangles
 /// in the same order, some with their corners rotated), with the open-edge marks rotated to
 /// match: the form the writer stores, so that the page decodes to what was written.

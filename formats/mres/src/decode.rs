@@ -8,7 +8,7 @@
 //! out itself, so the two layouts cannot drift apart.
 
 use super::codec::{encoded_len, index_bound, invalid, preamble, reference_counts, totals, unzigzag16, unzigzag32};
-use super::codec::{walk, EdgeTable, Invalid, Lanes, PlaneReader, Predictor, Shape, Targets, VertexKey, PREAMBLE};
+use super::codec::{walk, EdgeTable, Invalid, Lanes, Predictor, Shape, Targets, VertexKey, PREAMBLE};
 use super::records::ClusterHeader;
 use super::*;
 use std::cell::RefCell;
@@ -23,25 +23,30 @@ struct Scratch {
     /// Per vertex of the page in decoding order, its place in the page (the references'
     /// targets).
     order: Vec<u32>,
-    /// One cluster's predictors, then its residuals in decoding order and its values by slot
-    /// (see [`Sources::rebuild`]); never cleared, as each cluster writes what it reads.
+    /// Per vertex of the page in decoding order, where its values come from.
+    references: Vec<Reference>,
+    /// The far copies' values, in decoding order.
+    far: Vec<VertexKey>,
+    /// The copies' and the far copies' coded targets.
+    coded: (Vec<u32>, Vec<u32>),
+    /// The stored vertices' residuals in decoding order, then a zero: a copy's residual.
+    residuals: (Vec<[i32; 3]>, Vec<[u16; 2]>, Vec<[u16; 2]>),
+    /// One cluster's predictors and its values by slot (see [`Sources::rebuild`]); never
+    /// cleared, as each cluster writes what it reads.
     sources: Sources,
-    wide: Box<Residuals<[i32; 3]>>,
-    pairs: Box<Residuals<[u16; 2]>>,
+    wide: Box<[[i32; 3]; SLOTS]>,
+    pairs: Box<[[u16; 2]; SLOTS]>,
 }
 
-/// One attribute of one cluster while it is rebuilt: its residuals in decoding order and its
-/// values by slot.
-struct Residuals<T> {
-    /// In decoding order (a copied vertex's is zero).
-    residuals: [T; MAX_CLUSTER_VERTICES],
-    values: [T; SLOTS],
-}
-
-impl<T: Lanes> Residuals<T> {
-    fn new() -> Box<Residuals<T>> {
-        Box::new(Residuals { residuals: [T::default(); MAX_CLUSTER_VERTICES], values: [T::default(); SLOTS] })
-    }
+/// Where a vertex's values come from (FORMAT.md §4.3, references).
+#[derive(Clone, Copy, Debug)]
+enum Reference {
+    /// Its prediction plus its residuals.
+    Stored,
+    /// A copy of the vertex at this place in the page's decoding order, before it.
+    Copy(u32),
+    /// A far copy: the values of this far copy of the page, in order.
+    Far(u32),
 }
 
 thread_local! {
@@ -170,9 +175,13 @@ pub(crate) fn decode_page_gpu(
             uvs: Vec::new(),
             indices: Vec::new(),
             order: Vec::new(),
+            references: Vec::new(),
+            far: Vec::new(),
+            coded: Default::default(),
+            residuals: Default::default(),
             sources: Sources::default(),
-            wide: Residuals::new(),
-            pairs: Residuals::new(),
+            wide: Box::new([Default::default(); SLOTS]),
+            pairs: Box::new([Default::default(); SLOTS]),
         });
         let s = Sections::split(bytes, records, flags)?;
         let far = match (s.far, sources) {
@@ -205,45 +214,66 @@ impl Scratch {
         self.indices.clear();
         self.indices.reserve(3 * t_total);
         grow(&mut self.order, v_total);
+        self.references(s, far)?;
+        position_residuals(s, &mut self.residuals.0);
+        pair_residuals(if normals { s.normals } else { &[] }, s.stored, &mut self.residuals.1);
+        pair_residuals(if uvs { s.uvs } else { &[] }, s.stored, &mut self.residuals.2);
         let mut anchors = (<[i32; 3]>::default(), <[u16; 2]>::default(), <[u16; 2]>::default());
         let (mut vo, mut so, mut io) = (0usize, 0usize, 0usize);
-        let mut targets = Copies {
-            coded: PlaneReader { bytes: s.targets, planes: s.target_planes, count: s.copies, at: 0 },
-            follow: Targets::new(),
-            far_coded: PlaneReader { bytes: s.far_targets, planes: s.far_planes, count: s.far, at: 0 },
-            follow_far: Targets::new(),
-            sources: far,
-            near: 0,
-        };
         let (sources, wide, pairs) = (&mut self.sources, &mut *self.wide, &mut *self.pairs);
+        let residuals = &self.residuals;
         for (r, len) in records.iter().zip(s.lengths.chunks_exact(2)) {
             let (vc, tc) = (r.vertex_count as usize, r.triangle_count as usize);
             let len = u16::from_le_bytes([len[0], len[1]]) as usize;
             let start = self.indices.len();
             decode_indices(&s.coded[io..io + len], vc, tc, &mut self.indices)?;
             sources.walk(&self.indices[start..], vc, &mut self.edges);
-            let sc = sources.link(s, vo, &mut self.order[..v_total], &mut targets)?;
-            position_residuals(s, so, sc, &mut wide.residuals);
-            sources.spread(&mut wide.residuals, sc);
-            let far = |f: &(u16, VertexKey)| (f.0, f.1 .0);
-            anchors.0 = sources.rebuild(wide, vc, anchors.0, &mut self.positions[..v_total], vo, far);
+            let sc = sources.link(&self.references, vo, so, s.stored, &mut self.order[..v_total]);
+            let far = |g: u32| self.far.get(g as usize).copied().unwrap_or_default();
+            let page = &mut self.positions[..v_total];
+            anchors.0 = sources.rebuild(wide, &residuals.0, vc, anchors.0, page, vo, |g| far(g).0);
             if normals {
-                pair_residuals(s.normals, so, sc, s.stored, &mut pairs.residuals);
-                sources.spread(&mut pairs.residuals, sc);
-                let far = |f: &(u16, VertexKey)| (f.0, f.1 .1);
-                anchors.1 = sources.rebuild(pairs, vc, anchors.1, &mut self.normals[..v_total], vo, far);
+                let page = &mut self.normals[..v_total];
+                anchors.1 = sources.rebuild(pairs, &residuals.1, vc, anchors.1, page, vo, |g| far(g).1);
             }
             if uvs {
-                pair_residuals(s.uvs, so, sc, s.stored, &mut pairs.residuals);
-                sources.spread(&mut pairs.residuals, sc);
-                let far = |f: &(u16, VertexKey)| (f.0, f.1 .2);
-                anchors.2 = sources.rebuild(pairs, vc, anchors.2, &mut self.uvs[..v_total], vo, far);
+                let page = &mut self.uvs[..v_total];
+                anchors.2 = sources.rebuild(pairs, &residuals.2, vc, anchors.2, page, vo, |g| far(g).2);
             }
             (vo, so, io) = (vo + vc, so + sc, io + len);
         }
         let max_normal = ((1u32 << normal_bits.min(16)) - 1) as u16;
         if let Some(n) = self.normals[..if normals { v_total } else { 0 }].iter().flatten().find(|&&n| n > max_normal) {
             return invalid(format!("octahedral value {n} above {max_normal}"));
+        }
+        Ok(())
+    }
+
+    /// Where each vertex of the page takes its values from (FORMAT.md §4.3, references): every
+    /// copy's target and far copy's source vertex checked, the far copies' values read from the
+    /// sources. Left empty for a page without copies.
+    fn references(&mut self, s: &Sections, sources: Option<&SourceVertices>) -> Result<(), Invalid> {
+        self.references.clear();
+        self.far.clear();
+        if s.copies == 0 && s.far == 0 {
+            return Ok(());
+        }
+        plane_values(s.targets, s.target_planes, s.copies, &mut self.coded.0);
+        plane_values(s.far_targets, s.far_planes, s.far, &mut self.coded.1);
+        let (mut coded, mut far_coded) = (self.coded.0.iter(), self.coded.1.iter());
+        let (mut follow, mut follow_far, mut near) = (Targets::new(), Targets::new(), 0);
+        for (j, &flag) in s.references.iter().enumerate() {
+            let reference = match flag {
+                0 => Reference::Stored,
+                1 => Reference::Copy(follow.follow(coded.next().copied().unwrap_or(0), j)? as u32),
+                _ => {
+                    let Some(sources) = sources else { return invalid("a far copy in a page without far copies") };
+                    let u = follow_far.follow_far(far_coded.next().copied().unwrap_or(0), sources.total)?;
+                    self.far.push(sources.vertex(u, &mut near)?);
+                    Reference::Far(self.far.len() as u32 - 1)
+                }
+            };
+            self.references.push(reference);
         }
         Ok(())
     }
@@ -358,19 +388,6 @@ fn grow<T: Default + Clone>(v: &mut Vec<T>, len: usize) {
     }
 }
 
-/// The copies' targets and the far copies' source vertices as the page's clusters read them,
-/// in order.
-struct Copies<'a> {
-    coded: PlaneReader<'a>,
-    follow: Targets,
-    far_coded: PlaneReader<'a>,
-    follow_far: Targets,
-    /// The page's source vertices (present iff the page has far copies).
-    sources: Option<&'a SourceVertices<'a>>,
-    /// The source cluster of the last far copy (see [`SourceVertices::vertex`]).
-    near: usize,
-}
-
 /// Slot of a cluster's anchor (the previous cluster's first vertex) in [`Sources::rebuild`]'s
 /// values, after the 256 vertex slots.
 const ANCHOR: u16 = 256;
@@ -383,22 +400,20 @@ const COPIES: u16 = 512;
 const SLOTS: usize = 1024;
 
 /// A cluster's vertices in decoding order, each with the three value slots its prediction
-/// `a + b − d` reads: a parallelogram reads three decoded vertices, a neighbour `(n, ZERO,
-/// ZERO)`, the anchor `(ANCHOR, ZERO, ZERO)`, and a vertex that copies an earlier one
-/// (FORMAT.md §4.3, references) `(n, ZERO, ZERO)` or `(COPIES + i, ZERO, ZERO)` with a zero
-/// residual. One branch-free form for every vertex, so that each attribute is rebuilt in one
-/// tight loop.
+/// `a + b − d` reads and the place of its residuals: a parallelogram reads three decoded
+/// vertices, a neighbour `(n, ZERO, ZERO)`, the anchor `(ANCHOR, ZERO, ZERO)`, and a vertex that
+/// copies an earlier one (FORMAT.md §4.3, references) `(n, ZERO, ZERO)` or `(COPIES + i, ZERO,
+/// ZERO)` with the zero residual. One branch-free form for every vertex, so that each attribute
+/// is rebuilt in one tight loop.
 struct Sources {
     vertex: [u8; MAX_CLUSTER_VERTICES],
     slots: [[u16; 3]; MAX_CLUSTER_VERTICES],
-    /// Per vertex in decoding order: it copies an earlier vertex (no residuals stored).
-    copied: [bool; MAX_CLUSTER_VERTICES],
-    /// Whether any vertex of the cluster is copied.
-    copies: bool,
+    /// Per vertex in decoding order: its residuals' place among the page's.
+    residual: [u32; MAX_CLUSTER_VERTICES],
     /// The copied vertices of earlier clusters: (slot, place in the page).
     links: Vec<(u16, u32)>,
-    /// The far-copied vertices: (slot, their values read from the source layout).
-    far: Vec<(u16, VertexKey)>,
+    /// The far-copied vertices: (slot, which far copy of the page).
+    far: Vec<(u16, u32)>,
     len: usize,
 }
 
@@ -407,8 +422,7 @@ impl Default for Sources {
         Sources {
             vertex: [0; MAX_CLUSTER_VERTICES],
             slots: [[0; 3]; MAX_CLUSTER_VERTICES],
-            copied: [false; MAX_CLUSTER_VERTICES],
-            copies: false,
+            residual: [0; MAX_CLUSTER_VERTICES],
             links: Vec::with_capacity(MAX_CLUSTER_VERTICES),
             far: Vec::with_capacity(MAX_CLUSTER_VERTICES),
             len: 0,
@@ -434,93 +448,82 @@ impl Sources {
         self.len = self.len.min(MAX_CLUSTER_VERTICES);
     }
 
-    /// Reads the references of the walked cluster, whose vertices start at page vertex `vo`
-    /// (which is also where the cluster starts in decoding order): records each vertex's
-    /// place in `order` (page decoding order → place in the page) and points each copied
-    /// vertex at the slot of the vertex it copies, one of this cluster's or one filled from an
-    /// earlier cluster's. Returns how many of its vertices are stored with residuals.
-    fn link(&mut self, s: &Sections, vo: usize, order: &mut [u32], targets: &mut Copies) -> Result<usize, Invalid> {
+    /// Links the walked cluster, whose vertices start at place `vo` of the page's decoding
+    /// order (`references`, empty for a page without copies; also where it starts in the page)
+    /// and whose residuals at `so` of the `stored` vertices': records each vertex's place in
+    /// `order` (page decoding order → place in the page), its residuals' place, and points
+    /// each copied vertex at the slot of the vertex it copies, one of this cluster's or one
+    /// filled from an earlier cluster's or a source page's. Returns how many of its vertices
+    /// are stored with residuals.
+    fn link(&mut self, references: &[Reference], vo: usize, so: usize, stored: usize, order: &mut [u32]) -> usize {
         let n = self.len;
         self.links.clear();
         self.far.clear();
-        self.copies = false;
-        if s.copies == 0 && s.far == 0 {
-            return Ok(n);
-        }
-        self.copied[..n].fill(false);
+        let mut k = so;
+        let Some(references) = references.get(vo..vo + n) else {
+            // No copies: every vertex is stored.
+            for (i, r) in self.residual[..n].iter_mut().enumerate() {
+                *r = (so + i) as u32;
+            }
+            return n;
+        };
         for (&v, place) in self.vertex[..n].iter().zip(&mut order[vo..]) {
             *place = (vo + v as usize) as u32;
         }
-        let flags = &s.references[vo..][..n.min(order.len() - vo)];
-        let mut copies = 0;
-        for (i, &flag) in flags.iter().enumerate().filter(|(_, &f)| f != 0) {
-            (self.copied[i], self.copies) = (true, true);
-            copies += 1;
-            if flag == 2 {
-                let Some(far) = targets.sources else { return invalid("a far copy in a page without far copies") };
-                let u = targets.follow_far.follow_far(targets.far_coded.next(), far.total)?;
-                self.far.push((COPIES + i as u16, far.vertex(u, &mut targets.near)?));
-                self.slots[i] = [COPIES + i as u16, ZERO, ZERO];
-                continue;
-            }
-            let j = vo + i;
-            let target = targets.follow.follow(targets.coded.next(), j)?;
-            self.slots[i] = if target >= vo {
-                [self.vertex[target - vo] as u16, ZERO, ZERO]
-            } else {
-                self.links.push((COPIES + i as u16, order[target]));
-                [COPIES + i as u16, ZERO, ZERO]
+        for (i, &reference) in references.iter().enumerate() {
+            let copy = COPIES + i as u16;
+            (self.residual[i], self.slots[i]) = match reference {
+                Reference::Stored => {
+                    k += 1;
+                    ((k - 1) as u32, self.slots[i])
+                }
+                Reference::Copy(t) if t as usize >= vo => {
+                    let local = self.vertex.get(t as usize - vo).copied().unwrap_or(0);
+                    (stored as u32, [local as u16, ZERO, ZERO])
+                }
+                Reference::Copy(t) => {
+                    self.links.push((copy, order.get(t as usize).copied().unwrap_or(0)));
+                    (stored as u32, [copy, ZERO, ZERO])
+                }
+                Reference::Far(g) => {
+                    self.far.push((copy, g));
+                    (stored as u32, [copy, ZERO, ZERO])
+                }
             };
         }
-        Ok(n - copies)
+        k - so
     }
 
-    /// Moves the `stored` residuals read for the stored vertices to their places in decoding
-    /// order, zero for the copied ones (in place, from the end: a stored vertex's place is at
-    /// or after its residual's).
-    fn spread<T: Lanes>(&self, residuals: &mut [T; MAX_CLUSTER_VERTICES], stored: usize) {
-        if !self.copies {
-            return;
-        }
-        let mut k = stored;
-        for i in (0..self.len).rev() {
-            if self.copied[i] {
-                residuals[i] = T::default();
-            } else {
-                k = k.saturating_sub(1);
-                residuals[i] = residuals[k];
-            }
-        }
-    }
-
-    /// Each vertex's value (prediction plus residual, `residuals` in decoding order) into
-    /// the page's values `page`, the cluster's starting at `vo`; returns the first decoded
+    /// Each vertex's value (prediction plus residual, `residuals` the page's, in decoding
+    /// order, then a zero) into the page's values `page`, the cluster's starting at `vo`, using
+    /// `values` by slot and `far` for the page's far copies; returns the first decoded
     /// vertex's value, the next cluster's anchor. Every slot a prediction reads was written
     /// before: the walk predicts only from vertices it has visited, and a copy reads a vertex
     /// decoded before it.
     #[allow(clippy::too_many_arguments)]
     fn rebuild<T: Lanes>(
         &self,
-        r: &mut Residuals<T>,
+        values: &mut [T; SLOTS],
+        residuals: &[T],
         vc: usize,
         anchor: T,
         page: &mut [T],
         vo: usize,
-        far: impl Fn(&(u16, VertexKey)) -> (u16, T),
+        far: impl Fn(u32) -> T,
     ) -> T {
         let (before, here) = page.split_at_mut(vo);
-        let values = &mut r.values;
         values[ANCHOR as usize] = anchor;
         values[ZERO as usize] = T::default();
         for &(slot, at) in &self.links {
             values[slot as usize % SLOTS] = before.get(at as usize).copied().unwrap_or_default();
         }
-        for (slot, value) in self.far.iter().map(far) {
-            values[slot as usize % SLOTS] = value;
+        for &(slot, g) in &self.far {
+            values[slot as usize % SLOTS] = far(g);
         }
         let n = self.len.min(vc);
-        for ((&v, s), &r) in self.vertex[..n].iter().zip(&self.slots[..n]).zip(&r.residuals[..n]) {
+        for ((&v, s), &k) in self.vertex[..n].iter().zip(&self.slots[..n]).zip(&self.residual[..n]) {
             let at = |i: u16| values[i as usize % SLOTS];
+            let r = residuals.get(k as usize).copied().unwrap_or_default();
             values[v as usize] = at(s[0]).add(at(s[1])).sub(at(s[2])).add(r);
         }
         let len = vc.min(here.len()).min(MAX_CLUSTER_VERTICES);
@@ -529,34 +532,43 @@ impl Sources {
     }
 }
 
-/// The position residuals of the `sc` stored vertices of a cluster, the page's stored
-/// vertices from `so` on, from the page's byte planes (in decoding order; [`Sources::spread`]
-/// then puts them in place).
-fn position_residuals(s: &Sections, so: usize, sc: usize, out: &mut [[i32; 3]]) {
-    let out = &mut out[..sc];
-    let plane = |p: usize| s.positions[p * 3 * s.stored + 3 * so..][..3 * sc].chunks_exact(3);
-    for (o, b) in out.iter_mut().zip(plane(0)) {
-        *o = [b[0] as i32, b[1] as i32, b[2] as i32];
-    }
-    for p in 1..s.planes {
-        for (o, b) in out.iter_mut().zip(plane(p)) {
-            for k in 0..3 {
-                o[k] |= (b[k] as i32) << (8 * p);
-            }
+/// The `count` values of `planes` byte planes (FORMAT.md §4.3, byte planes) into `out`.
+fn plane_values(bytes: &[u8], planes: usize, count: usize, out: &mut Vec<u32>) {
+    out.clear();
+    out.resize(count, 0);
+    for p in 0..planes {
+        let plane = bytes.get(p * count..(p + 1) * count).unwrap_or_default();
+        for (o, &b) in out.iter_mut().zip(plane) {
+            *o |= (b as u32) << (8 * p);
         }
-    }
-    for o in out.iter_mut() {
-        *o = o.map(|z| unzigzag32(z as u32));
     }
 }
 
-/// The residuals of a two-plane pair section (normals or UVs) for the `sc` stored vertices of
-/// a cluster, the page's stored vertices (`stored` in all) from `so` on.
-fn pair_residuals(planes: &[u8], so: usize, sc: usize, stored: usize, out: &mut [[u16; 2]]) {
-    let low = &planes[2 * so..][..2 * sc];
-    let high = &planes[2 * stored + 2 * so..][..2 * sc];
-    for ((out, l), h) in out.iter_mut().zip(low.chunks_exact(2)).zip(high.chunks_exact(2)) {
-        *out = [unzigzag16(u16::from_le_bytes([l[0], h[0]])), unzigzag16(u16::from_le_bytes([l[1], h[1]]))];
+/// The position residuals of the page's stored vertices from its byte planes, in decoding
+/// order, then a zero (a copy's).
+fn position_residuals(s: &Sections, out: &mut Vec<[i32; 3]>) {
+    out.clear();
+    out.resize(s.stored + 1, [0; 3]);
+    let flat = &mut out.as_flattened_mut()[..3 * s.stored];
+    for p in 0..s.planes {
+        let plane = s.positions.get(p * 3 * s.stored..(p + 1) * 3 * s.stored).unwrap_or_default();
+        for (o, &b) in flat.iter_mut().zip(plane) {
+            *o |= (b as i32) << (8 * p);
+        }
+    }
+    for o in flat {
+        *o = unzigzag32(*o as u32);
+    }
+}
+
+/// The residuals of a two-plane pair section (normals or UVs, `planes` empty where the file
+/// has none) of the page's `stored` vertices, in decoding order, then a zero.
+fn pair_residuals(planes: &[u8], stored: usize, out: &mut Vec<[u16; 2]>) {
+    out.clear();
+    out.resize(stored + 1, [0; 2]);
+    let (low, high) = planes.split_at(planes.len() / 2);
+    for ((o, &l), &h) in out.as_flattened_mut().iter_mut().zip(low).zip(high) {
+        *o = unzigzag16(u16::from_le_bytes([l, h]));
     }
 }
 
