@@ -23,8 +23,6 @@ struct Scratch {
     /// Per vertex of the page in decoding order, its place in the page (the references'
     /// targets).
     order: Vec<u32>,
-    /// Per vertex of the page in decoding order, where its values come from.
-    references: Vec<Reference>,
     /// The far copies' values, in decoding order.
     far: Vec<VertexKey>,
     /// The copies' and the far copies' coded targets.
@@ -38,15 +36,14 @@ struct Scratch {
     pairs: Box<[[u16; 2]; SLOTS]>,
 }
 
-/// Where a vertex's values come from (FORMAT.md §4.3, references).
-#[derive(Clone, Copy, Debug)]
-enum Reference {
-    /// Its prediction plus its residuals.
-    Stored,
-    /// A copy of the vertex at this place in the page's decoding order, before it.
-    Copy(u32),
-    /// A far copy: the values of this far copy of the page, in order.
-    Far(u32),
+/// The copies' targets as the page's clusters follow them, in order (FORMAT.md §4.3).
+struct Copies<'a> {
+    /// Their coded targets.
+    coded: &'a [u32],
+    follow: Targets,
+    /// The next copy's and far copy's numbers.
+    next: usize,
+    next_far: usize,
 }
 
 thread_local! {
@@ -175,7 +172,6 @@ pub(crate) fn decode_page_gpu(
             uvs: Vec::new(),
             indices: Vec::new(),
             order: Vec::new(),
-            references: Vec::new(),
             far: Vec::new(),
             coded: Default::default(),
             residuals: Default::default(),
@@ -214,7 +210,9 @@ impl Scratch {
         self.indices.clear();
         self.indices.reserve(3 * t_total);
         grow(&mut self.order, v_total);
-        self.references(s, far)?;
+        self.far_copies(s, far)?;
+        plane_values(s.targets, s.target_planes, s.copies, &mut self.coded.0);
+        let mut copies = Copies { coded: &self.coded.0, follow: Targets::new(), next: 0, next_far: 0 };
         position_residuals(s, &mut self.residuals.0);
         pair_residuals(if normals { s.normals } else { &[] }, s.stored, &mut self.residuals.1);
         pair_residuals(if uvs { s.uvs } else { &[] }, s.stored, &mut self.residuals.2);
@@ -228,7 +226,7 @@ impl Scratch {
             let start = self.indices.len();
             decode_indices(&s.coded[io..io + len], vc, tc, &mut self.indices)?;
             sources.walk(&self.indices[start..], vc, &mut self.edges);
-            let sc = sources.link(&self.references, vo, so, s.stored, &mut self.order[..v_total]);
+            let sc = sources.link(s, vo, so, &mut self.order[..v_total], &mut copies)?;
             let far = |g: u32| self.far.get(g as usize).copied().unwrap_or_default();
             let page = &mut self.positions[..v_total];
             anchors.0 = sources.rebuild(wide, &residuals.0, vc, anchors.0, page, vo, |g| far(g).0);
@@ -249,31 +247,16 @@ impl Scratch {
         Ok(())
     }
 
-    /// Where each vertex of the page takes its values from (FORMAT.md §4.3, references): every
-    /// copy's target and far copy's source vertex checked, the far copies' values read from the
-    /// sources. Left empty for a page without copies.
-    fn references(&mut self, s: &Sections, sources: Option<&SourceVertices>) -> Result<(), Invalid> {
-        self.references.clear();
+    /// The values of the page's far copies (FORMAT.md §4.3), in order, read from its sources,
+    /// every source vertex number checked.
+    fn far_copies(&mut self, s: &Sections, sources: Option<&SourceVertices>) -> Result<(), Invalid> {
         self.far.clear();
-        if s.copies == 0 && s.far == 0 {
-            return Ok(());
-        }
-        plane_values(s.targets, s.target_planes, s.copies, &mut self.coded.0);
+        let Some(sources) = sources.filter(|_| s.far > 0) else { return Ok(()) };
         plane_values(s.far_targets, s.far_planes, s.far, &mut self.coded.1);
-        let (mut coded, mut far_coded) = (self.coded.0.iter(), self.coded.1.iter());
-        let (mut follow, mut follow_far, mut near) = (Targets::new(), Targets::new(), 0);
-        for (j, &flag) in s.references.iter().enumerate() {
-            let reference = match flag {
-                0 => Reference::Stored,
-                1 => Reference::Copy(follow.follow(coded.next().copied().unwrap_or(0), j)? as u32),
-                _ => {
-                    let Some(sources) = sources else { return invalid("a far copy in a page without far copies") };
-                    let u = follow_far.follow_far(far_coded.next().copied().unwrap_or(0), sources.total)?;
-                    self.far.push(sources.vertex(u, &mut near)?);
-                    Reference::Far(self.far.len() as u32 - 1)
-                }
-            };
-            self.references.push(reference);
+        let (mut follow, mut near) = (Targets::new(), 0);
+        for &z in &self.coded.1 {
+            let u = follow.follow_far(z, sources.total)?;
+            self.far.push(sources.vertex(u, &mut near)?);
         }
         Ok(())
     }
@@ -448,50 +431,60 @@ impl Sources {
         self.len = self.len.min(MAX_CLUSTER_VERTICES);
     }
 
-    /// Links the walked cluster, whose vertices start at place `vo` of the page's decoding
-    /// order (`references`, empty for a page without copies; also where it starts in the page)
-    /// and whose residuals at `so` of the `stored` vertices': records each vertex's place in
-    /// `order` (page decoding order → place in the page), its residuals' place, and points
-    /// each copied vertex at the slot of the vertex it copies, one of this cluster's or one
-    /// filled from an earlier cluster's or a source page's. Returns how many of its vertices
-    /// are stored with residuals.
-    fn link(&mut self, references: &[Reference], vo: usize, so: usize, stored: usize, order: &mut [u32]) -> usize {
+    /// Reads the references of the walked cluster, whose vertices start at page vertex `vo`
+    /// (which is also where the cluster starts in decoding order) and its residuals at `so`
+    /// of the page's: records each vertex's place in `order` (page decoding order → place in
+    /// the page) and its residuals' place, and points each copied vertex at the slot of the
+    /// vertex it copies, one of this cluster's or one filled from an earlier cluster's or a
+    /// source page's. Returns how many of its vertices are stored with residuals.
+    fn link(
+        &mut self,
+        s: &Sections,
+        vo: usize,
+        so: usize,
+        order: &mut [u32],
+        copies: &mut Copies,
+    ) -> Result<usize, Invalid> {
         let n = self.len;
         self.links.clear();
         self.far.clear();
-        let mut k = so;
-        let Some(references) = references.get(vo..vo + n) else {
-            // No copies: every vertex is stored.
+        if s.copies == 0 && s.far == 0 {
             for (i, r) in self.residual[..n].iter_mut().enumerate() {
                 *r = (so + i) as u32;
             }
-            return n;
-        };
+            return Ok(n);
+        }
         for (&v, place) in self.vertex[..n].iter().zip(&mut order[vo..]) {
             *place = (vo + v as usize) as u32;
         }
-        for (i, &reference) in references.iter().enumerate() {
+        let zero = s.stored as u32;
+        let mut k = so;
+        for (i, &flag) in s.references[vo..][..n.min(order.len() - vo)].iter().enumerate() {
             let copy = COPIES + i as u16;
-            (self.residual[i], self.slots[i]) = match reference {
-                Reference::Stored => {
+            (self.residual[i], self.slots[i]) = match flag {
+                0 => {
                     k += 1;
                     ((k - 1) as u32, self.slots[i])
                 }
-                Reference::Copy(t) if t as usize >= vo => {
-                    let local = self.vertex.get(t as usize - vo).copied().unwrap_or(0);
-                    (stored as u32, [local as u16, ZERO, ZERO])
+                1 => {
+                    let z = copies.coded.get(copies.next).copied().unwrap_or(0);
+                    copies.next += 1;
+                    match copies.follow.follow(z, vo + i)? {
+                        t if t >= vo => (zero, [self.vertex[(t - vo) % MAX_CLUSTER_VERTICES] as u16, ZERO, ZERO]),
+                        t => {
+                            self.links.push((copy, order[t]));
+                            (zero, [copy, ZERO, ZERO])
+                        }
+                    }
                 }
-                Reference::Copy(t) => {
-                    self.links.push((copy, order.get(t as usize).copied().unwrap_or(0)));
-                    (stored as u32, [copy, ZERO, ZERO])
-                }
-                Reference::Far(g) => {
-                    self.far.push((copy, g));
-                    (stored as u32, [copy, ZERO, ZERO])
+                _ => {
+                    self.far.push((copy, copies.next_far as u32));
+                    copies.next_far += 1;
+                    (zero, [copy, ZERO, ZERO])
                 }
             };
         }
-        k - so
+        Ok(k - so)
     }
 
     /// Each vertex's value (prediction plus residual, `residuals` the page's, in decoding
