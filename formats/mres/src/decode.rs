@@ -734,8 +734,18 @@ impl<'a, const N: usize> Records<'a, N> {
             return None;
         }
         // Sixteen bytes from the record's first byte hold all of it (at most 96 bits after a
-        // shift of at most 7): one load instead of a checked read per field.
+        // shift of at most 7): one load instead of a checked read per field; eight bytes for
+        // a record of at most 57 bits (most), which then splits in 64-bit arithmetic.
         let tail = block.get((at / 8) as usize..).unwrap_or_default();
+        let mask = |w: u32| (1u64 << w) - 1;
+        if let (true, Some(window)) = (self.stride <= 57, tail.first_chunk::<8>()) {
+            let mut record = u64::from_le_bytes(*window) >> (at % 8);
+            return Some(self.widths.map(|w| {
+                let field = (record & mask(w)) as u32;
+                record >>= w;
+                field
+            }));
+        }
         let mut window = [0u8; 16];
         match tail.first_chunk::<16>() {
             Some(w) => window = *w,
@@ -743,7 +753,7 @@ impl<'a, const N: usize> Records<'a, N> {
         }
         let mut record = u128::from_le_bytes(window) >> (at % 8);
         Some(self.widths.map(|w| {
-            let field = (record as u64 & ((1u64 << w) - 1)) as u32;
+            let field = (record as u64 & mask(w)) as u32;
             record >>= w;
             field
         }))
@@ -850,24 +860,27 @@ impl<'a> SourceCluster<'a> {
 mod tests {
     use super::*;
 
-    /// Every record of a block reads as [`bits::read_bits`] reads its fields, the last ones too
-    /// (fewer than sixteen bytes from their start to the block's end); one past them is `None`.
+    /// Every record of a block reads as [`bits::read_bits`] reads its fields, narrow records
+    /// and wide ones, the last ones too (fewer than sixteen bytes from their start to the
+    /// block's end); one past them is `None`.
     #[test]
     fn records_read_as_their_bit_fields() {
-        let widths = [13, 32, 7];
-        let mut writer = bits::BitWriter::default();
-        for v in 0..9u32 {
-            for (k, &w) in widths.iter().enumerate() {
-                writer.push(v.wrapping_mul(2654435761) >> k, w);
+        for widths in [[13, 32, 7], [32, 31, 30]] {
+            let mut writer = bits::BitWriter::default();
+            for v in 0..9u32 {
+                for (k, &w) in widths.iter().enumerate() {
+                    writer.push(v.wrapping_mul(2654435761) >> k, w);
+                }
             }
+            let block: Vec<u8> = writer.finish().iter().flat_map(|w| w.to_le_bytes()).collect();
+            let records = Records::new(|len| block.get(..len), 9, widths);
+            let stride: u32 = widths.iter().sum();
+            for v in 0..9u64 {
+                let at = |k: usize| v * stride as u64 + widths[..k].iter().sum::<u32>() as u64;
+                let fields: [u32; 3] = std::array::from_fn(|k| bits::read_bits(&block, at(k), widths[k]).unwrap());
+                assert_eq!(records.get(v), Some(fields), "widths {widths:?}, record {v}");
+            }
+            assert_eq!(records.get(9), None);
         }
-        let block: Vec<u8> = writer.finish().iter().flat_map(|w| w.to_le_bytes()).collect();
-        let records = Records::new(|len| block.get(..len), 9, widths);
-        for v in 0..9u64 {
-            let at = |k: usize| v * 52 + widths[..k].iter().sum::<u32>() as u64;
-            let fields: [u32; 3] = std::array::from_fn(|k| bits::read_bits(&block, at(k), widths[k]).unwrap());
-            assert_eq!(records.get(v), Some(fields), "record {v}");
-        }
-        assert_eq!(records.get(9), None);
     }
 }
