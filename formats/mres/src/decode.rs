@@ -214,8 +214,12 @@ impl Scratch {
         plane_values(s.targets, s.target_planes, s.copies, &mut self.coded.0);
         let mut copies = Copies { coded: &self.coded.0, follow: Targets::new(), next: 0, next_far: 0 };
         position_residuals(s, &mut self.residuals.0);
-        pair_residuals(if normals { s.normals } else { &[] }, s.stored, &mut self.residuals.1);
-        pair_residuals(if uvs { s.uvs } else { &[] }, s.stored, &mut self.residuals.2);
+        if normals {
+            pair_residuals(s.normals, s.stored, &mut self.residuals.1);
+        }
+        if uvs {
+            pair_residuals(s.uvs, s.stored, &mut self.residuals.2);
+        }
         let mut anchors = (<[i32; 3]>::default(), <[u16; 2]>::default(), <[u16; 2]>::default());
         let (mut vo, mut so, mut io) = (0usize, 0usize, 0usize);
         let (sources, wide, pairs) = (&mut self.sources, &mut *self.wide, &mut *self.pairs);
@@ -554,8 +558,8 @@ fn position_residuals(s: &Sections, out: &mut Vec<[i32; 3]>) {
     }
 }
 
-/// The residuals of a two-plane pair section (normals or UVs, `planes` empty where the file
-/// has none) of the page's `stored` vertices, in decoding order, then a zero.
+/// The residuals of a two-plane pair section (normals or UVs) of the page's `stored`
+/// vertices, in decoding order, then a zero.
 fn pair_residuals(planes: &[u8], stored: usize, out: &mut Vec<[u16; 2]>) {
     out.clear();
     out.resize(stored + 1, [0; 2]);
