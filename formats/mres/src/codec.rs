@@ -314,11 +314,16 @@ pub(crate) fn preamble(bytes: &[u8]) -> Result<(usize, usize, usize), Invalid> {
 /// The numbers of copies (flag 1) and far copies (flag 2) among a page's reference flags,
 /// each checked to be 0, 1 or 2.
 pub(crate) fn reference_counts(flags: &[u8]) -> Result<(usize, usize), Invalid> {
-    // One branch-free pass: a flag over 2 has a bit above bit 1 or both low bits set, which
-    // `bad` collects; the offender is looked for only then.
-    let (bad, ones, twos) = flags.iter().fold((0u8, 0usize, 0usize), |(bad, c, g), &f| {
-        (bad | (f >> 2) | (f & (f >> 1)), c + (f & 1) as usize, g + (f >> 1 & 1) as usize)
-    });
+    // Branch-free passes: a flag over 2 has a bit above bit 1 or both low bits set, which
+    // `bad` collects; the offender is looked for only then. The bits are counted in bytes over
+    // runs of 255 flags, which vectorize (16 flags per instruction), where usize counters
+    // took ten instructions a flag.
+    let (mut bad, mut ones, mut twos) = (0u8, 0usize, 0usize);
+    for run in flags.chunks(255) {
+        bad |= run.iter().fold(0, |bad, &f| bad | (f >> 2) | (f & (f >> 1)));
+        ones += run.iter().map(|&f| f & 1).sum::<u8>() as usize;
+        twos += run.iter().map(|&f| f >> 1 & 1).sum::<u8>() as usize;
+    }
     if bad != 0 {
         let f = flags.iter().find(|&&f| f > 2).copied().unwrap_or(u8::MAX);
         return invalid(format!("reference flag {f} is not 0, 1 or 2"));

@@ -110,7 +110,9 @@ impl<'a> Sections<'a> {
         let (positions, rest) = rest.split_at(planes * 3 * stored);
         let (normals, rest) = rest.split_at(with(FLAG_NORMALS, 4 * stored));
         let (uvs, materials) = rest.split_at(with(FLAG_UVS, 4 * stored));
-        if let Some(m) = marks.iter().find(|&&m| m > 7) {
+        // One branch-free pass over every mark; the offender is looked for only then.
+        if marks.iter().fold(0, |acc, &m| acc | m) > 7 {
+            let m = marks.iter().find(|&&m| m > 7).copied().unwrap_or_default();
             return invalid(format!("open-edge mark {m} has bits above bit 2"));
         }
         Ok(Sections {
