@@ -197,6 +197,17 @@ impl Lanes for [u16; 2] {
     }
 }
 
+/// All of a vertex's attributes at once (see [`VertexKey`]), so that a cluster's are rebuilt in
+/// one pass.
+impl<A: Lanes, B: Lanes, C: Lanes> Lanes for (A, B, C) {
+    fn add(self, o: Self) -> Self {
+        (self.0.add(o.0), self.1.add(o.1), self.2.add(o.2))
+    }
+    fn sub(self, o: Self) -> Self {
+        (self.0.sub(o.0), self.1.sub(o.1), self.2.sub(o.2))
+    }
+}
+
 /// The predicted value from the values decoded so far; `anchor` is the previous cluster's
 /// first vertex (zero for the page's first cluster).
 pub(crate) fn predict<T: Lanes>(p: Predictor, values: &[T], anchor: T) -> T {

@@ -33,7 +33,7 @@ struct Scratch {
     /// cleared, as each cluster writes what it reads.
     sources: Sources,
     wide: Box<[[i32; 3]; SLOTS]>,
-    pairs: Box<[[u16; 2]; SLOTS]>,
+    all: Box<[VertexKey; SLOTS]>,
 }
 
 /// The copies' targets as the page's clusters follow them, in order (FORMAT.md §4.3).
@@ -179,7 +179,7 @@ pub(crate) fn decode_page_gpu(
             residuals: Default::default(),
             sources: Sources::default(),
             wide: Box::new([Default::default(); SLOTS]),
-            pairs: Box::new([Default::default(); SLOTS]),
+            all: Box::new([Default::default(); SLOTS]),
         });
         let s = Sections::split(bytes, records, flags)?;
         let far = match (s.far, sources) {
@@ -222,9 +222,9 @@ impl Scratch {
         if uvs {
             pair_residuals(s.uvs, s.stored, &mut self.residuals.2);
         }
-        let mut anchors = (<[i32; 3]>::default(), <[u16; 2]>::default(), <[u16; 2]>::default());
+        let mut anchor = VertexKey::default();
         let (mut vo, mut so, mut io) = (0usize, 0usize, 0usize);
-        let (sources, wide, pairs) = (&mut self.sources, &mut *self.wide, &mut *self.pairs);
+        let (sources, wide, all) = (&mut self.sources, &mut *self.wide, &mut *self.all);
         let residuals = &self.residuals;
         for (r, len) in records.iter().zip(s.lengths.chunks_exact(2)) {
             let (vc, tc) = (r.vertex_count as usize, r.triangle_count as usize);
@@ -234,15 +234,29 @@ impl Scratch {
             sources.walk(&self.indices[start..], vc, &mut self.edges);
             let sc = sources.link(s, vo, so, &mut self.order[..v_total], &mut copies)?;
             let far = |g: u32| self.far.get(g as usize).copied().unwrap_or_default();
-            let page = &mut self.positions[..v_total];
-            anchors.0 = sources.rebuild(wide, &residuals.0, vc, anchors.0, page, vo, |g| far(g).0);
-            if normals {
-                let page = &mut self.normals[..v_total];
-                anchors.1 = sources.rebuild(pairs, &residuals.1, vc, anchors.1, page, vo, |g| far(g).1);
-            }
-            if uvs {
-                let page = &mut self.uvs[..v_total];
-                anchors.2 = sources.rebuild(pairs, &residuals.2, vc, anchors.2, page, vo, |g| far(g).2);
+            let n = vc.min(MAX_CLUSTER_VERTICES);
+            let here = vo..vo + n;
+            if !normals && !uvs {
+                let earlier = |k| at(&self.positions, k);
+                anchor.0 = sources.rebuild(wide, vc, anchor.0, |k| at(&residuals.0, k), earlier, |g| far(g).0);
+                if let Some(page) = self.positions.get_mut(here) {
+                    page.copy_from_slice(&wide[..n]);
+                }
+            } else {
+                // Every attribute in one pass (the ones the file lacks come out zero).
+                let p = &self.positions[..];
+                let nr = if normals { &self.normals[..] } else { &[] };
+                let u = if uvs { &self.uvs[..] } else { &[] };
+                let earlier = |k| (at(p, k), at(nr, k), at(u, k));
+                let residual = |k| (at(&residuals.0, k), at(&residuals.1, k), at(&residuals.2, k));
+                anchor = sources.rebuild(all, vc, anchor, residual, earlier, far);
+                column(&mut self.positions, here.clone(), &all[..n], |v| v.0);
+                if normals {
+                    column(&mut self.normals, here.clone(), &all[..n], |v| v.1);
+                }
+                if uvs {
+                    column(&mut self.uvs, here, &all[..n], |v| v.2);
+                }
             }
             (vo, so, io) = (vo + vc, so + sc, io + len);
         }
@@ -370,6 +384,19 @@ impl Scratch {
     }
 }
 
+/// Value `k` of `values`, or zero past them (an attribute the file lacks).
+fn at<T: Copy + Default>(values: &[T], k: u32) -> T {
+    values.get(k as usize).copied().unwrap_or_default()
+}
+
+/// One attribute of rebuilt vertices (`value` of each of `all`) into the page's values at
+/// `places`.
+fn column<T>(page: &mut [T], places: std::ops::Range<usize>, all: &[VertexKey], value: fn(&VertexKey) -> T) {
+    if let Some(out) = page.get_mut(places) {
+        out.iter_mut().zip(all).for_each(|(o, v)| *o = value(v));
+    }
+}
+
 /// `v` at least `len` long, reusing its allocation (what it holds is overwritten).
 fn grow<T: Default + Clone>(v: &mut Vec<T>, len: usize) {
     if v.len() < len {
@@ -493,28 +520,25 @@ impl Sources {
         Ok(k - so)
     }
 
-    /// Each vertex's value (prediction plus residual, `residuals` the page's, in decoding
-    /// order, then a zero) into the page's values `page`, the cluster's starting at `vo`, using
-    /// `values` by slot and `far` for the page's far copies; returns the first decoded
-    /// vertex's value, the next cluster's anchor. Every slot a prediction reads was written
-    /// before: the walk predicts only from vertices it has visited, and a copy reads a vertex
-    /// decoded before it.
-    #[allow(clippy::too_many_arguments)]
+    /// Each vertex's value (prediction plus residual) into `values`, at its local index:
+    /// `residual` gives the residuals at a place among the page's (the zero past them for a
+    /// copy), `earlier` the values of a vertex of an earlier cluster at its place in the page,
+    /// `far` the values of the page's far copies; returns the first decoded vertex's value, the
+    /// next cluster's anchor. Every slot a prediction reads was written before: the walk
+    /// predicts only from vertices it has visited, and a copy reads a vertex decoded before it.
     fn rebuild<T: Lanes>(
         &self,
         values: &mut [T; SLOTS],
-        residuals: &[T],
         vc: usize,
         anchor: T,
-        page: &mut [T],
-        vo: usize,
+        residual: impl Fn(u32) -> T,
+        earlier: impl Fn(u32) -> T,
         far: impl Fn(u32) -> T,
     ) -> T {
-        let (before, here) = page.split_at_mut(vo);
         values[ANCHOR as usize] = anchor;
         values[ZERO as usize] = T::default();
         for &(slot, at) in &self.links {
-            values[slot as usize % SLOTS] = before.get(at as usize).copied().unwrap_or_default();
+            values[slot as usize % SLOTS] = earlier(at);
         }
         for &(slot, g) in &self.far {
             values[slot as usize % SLOTS] = far(g);
@@ -522,11 +546,8 @@ impl Sources {
         let n = self.len.min(vc);
         for ((&v, s), &k) in self.vertex[..n].iter().zip(&self.slots[..n]).zip(&self.residual[..n]) {
             let at = |i: u16| values[i as usize % SLOTS];
-            let r = residuals.get(k as usize).copied().unwrap_or_default();
-            values[v as usize] = at(s[0]).add(at(s[1])).sub(at(s[2])).add(r);
+            values[v as usize] = at(s[0]).add(at(s[1])).sub(at(s[2])).add(residual(k));
         }
-        let len = vc.min(here.len()).min(MAX_CLUSTER_VERTICES);
-        here[..len].copy_from_slice(&values[..len]);
         values[self.vertex[0] as usize]
     }
 }
