@@ -28,13 +28,16 @@ struct Scratch {
     /// The copies' and the far copies' coded targets.
     coded: (Vec<u32>, Vec<u32>),
     /// The stored vertices' residuals in decoding order, then a zero: a copy's residual.
-    residuals: (Vec<[i32; 3]>, Vec<[u16; 2]>, Vec<[u16; 2]>),
+    residuals: Columns,
     /// One cluster's predictors and its values by slot (see [`Sources::rebuild`]); never
     /// cleared, as each cluster writes what it reads.
     sources: Sources,
     wide: Box<[[i32; 3]; SLOTS]>,
     all: Box<[VertexKey; SLOTS]>,
 }
+
+/// One value per vertex of each attribute: positions, normals, UVs.
+type Columns = (Vec<[i32; 3]>, Vec<[u16; 2]>, Vec<[u16; 2]>);
 
 /// The copies' targets as the page's clusters follow them, in order (FORMAT.md §4.3).
 struct Copies<'a> {
@@ -871,8 +874,8 @@ impl<'a> SourceCluster<'a> {
         let mut key: VertexKey = (position, [0; 2], [0; 2]);
         if self.with_normals {
             let deltas = self.normals.get(v as u64).ok_or_else(outside)?;
-            for k in 0..2 {
-                key.1[k] = u16::try_from(self.normal_min[k] as u32 + deltas[k]).map_err(|_| outside())?;
+            for ((value, &min), &d) in key.1.iter_mut().zip(&self.normal_min).zip(&deltas) {
+                *value = u16::try_from(min as u32 + d).map_err(|_| outside())?;
             }
         }
         if self.with_uvs {
