@@ -166,7 +166,7 @@ pub(crate) fn walk(indices: &[u8], vertex_count: usize, edges: &mut EdgeTable, m
             edges.insert(t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
         }
     }
-    for (v, _) in seen.iter().enumerate().take(vertex_count).filter(|(_, &s)| !s) {
+    for v in (0..vertex_count.min(MAX_CLUSTER_VERTICES)).filter(|&v| !seen[v]) {
         visit(v as u8, previous(last));
         last = Some(v as u8);
     }
