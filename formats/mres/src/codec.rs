@@ -144,8 +144,7 @@ pub(crate) fn walk(indices: &[u8], vertex_count: usize, edges: &mut EdgeTable, m
     let mut seen = [false; MAX_CLUSTER_VERTICES];
     let mut last: Option<u8> = None;
     let previous = |last: Option<u8>| last.map_or(Predictor::Anchor, Predictor::Neighbour);
-    for t in indices.chunks_exact(3) {
-        let t = [t[0], t[1], t[2]];
+    for &t in indices.as_chunks::<3>().0 {
         for k in 0..3 {
             let v = t[k];
             if seen[v as usize] {
