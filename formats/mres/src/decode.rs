@@ -378,10 +378,11 @@ impl Scratch {
             pack(&mut indices[(3 * tc).next_multiple_of(4)..], marks, [3]);
         }
         if flags & FLAG_MATERIALS != 0 {
-            let t_total = s.materials.len() / 2;
+            let (low, high) = s.materials.split_at(s.materials.len() / 2);
             let r = block(ClusterHeader::MATERIALS);
-            for (i, out) in raw[r].chunks_exact_mut(2).enumerate() {
-                out.copy_from_slice(&[s.materials[to + i], s.materials[t_total + to + i]]);
+            let pairs = low[to..to + tc].iter().zip(&high[to..to + tc]);
+            for (out, (&l, &h)) in raw[r].as_chunks_mut::<2>().0.iter_mut().zip(pairs) {
+                *out = [l, h];
             }
         }
     }
