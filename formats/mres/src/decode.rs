@@ -32,6 +32,8 @@ struct Scratch {
     /// One cluster's predictors and its values by slot (see [`Sources::rebuild`]); never
     /// cleared, as each cluster writes what it reads.
     sources: Sources,
+    /// A cluster's values by slot while it is rebuilt: positions alone (a file without
+    /// normals or UVs), or every attribute.
     wide: Box<[[i32; 3]; SLOTS]>,
     all: Box<[VertexKey; SLOTS]>,
 }
