@@ -8,7 +8,7 @@
 //! out itself, so the two layouts cannot drift apart.
 
 use super::codec::{encoded_len, index_bound, invalid, preamble, reference_counts, totals, unzigzag16, unzigzag32};
-use super::codec::{walk, EdgeTable, Invalid, Lanes, PlaneReader, Predictor, Shape, Targets, VertexKey, PREAMBLE};
+use super::codec::{walk, EdgeTable, Invalid, Lanes, Predictor, Shape, Targets, VertexKey, PREAMBLE};
 use super::records::ClusterHeader;
 use super::*;
 use std::cell::RefCell;
@@ -23,25 +23,32 @@ struct Scratch {
     /// Per vertex of the page in decoding order, its place in the page (the references'
     /// targets).
     order: Vec<u32>,
-    /// One cluster's predictors, then its residuals in decoding order and its values by slot
-    /// (see [`Sources::rebuild`]); never cleared, as each cluster writes what it reads.
+    /// The far copies' values, in decoding order.
+    far: Vec<VertexKey>,
+    /// The copies' and the far copies' coded targets.
+    coded: (Vec<u32>, Vec<u32>),
+    /// The stored vertices' residuals in decoding order, then a zero: a copy's residual.
+    residuals: Columns,
+    /// One cluster's predictors and its values by slot (see [`Sources::rebuild`]); never
+    /// cleared, as each cluster writes what it reads.
     sources: Sources,
-    wide: Box<Residuals<[i32; 3]>>,
-    pairs: Box<Residuals<[u16; 2]>>,
+    /// A cluster's values by slot while it is rebuilt: positions alone (a file without
+    /// normals or UVs), or every attribute.
+    wide: Box<[[i32; 3]; SLOTS]>,
+    all: Box<[VertexKey; SLOTS]>,
 }
 
-/// One attribute of one cluster while it is rebuilt: its residuals in decoding order and its
-/// values by slot.
-struct Residuals<T> {
-    /// In decoding order (a copied vertex's is zero).
-    residuals: [T; MAX_CLUSTER_VERTICES],
-    values: [T; SLOTS],
-}
+/// One value per vertex of each attribute: positions, normals, UVs.
+type Columns = (Vec<[i32; 3]>, Vec<[u16; 2]>, Vec<[u16; 2]>);
 
-impl<T: Lanes> Residuals<T> {
-    fn new() -> Box<Residuals<T>> {
-        Box::new(Residuals { residuals: [T::default(); MAX_CLUSTER_VERTICES], values: [T::default(); SLOTS] })
-    }
+/// The copies' targets as the page's clusters follow them, in order (FORMAT.md §4.3).
+struct Copies<'a> {
+    /// Their coded targets.
+    coded: &'a [u32],
+    follow: Targets,
+    /// The next copy's and far copy's numbers.
+    next: usize,
+    next_far: usize,
 }
 
 thread_local! {
@@ -108,7 +115,9 @@ impl<'a> Sections<'a> {
         let (positions, rest) = rest.split_at(planes * 3 * stored);
         let (normals, rest) = rest.split_at(with(FLAG_NORMALS, 4 * stored));
         let (uvs, materials) = rest.split_at(with(FLAG_UVS, 4 * stored));
-        if let Some(m) = marks.iter().find(|&&m| m > 7) {
+        // One branch-free pass over every mark; the offender is looked for only then.
+        if marks.iter().fold(0, |acc, &m| acc | m) > 7 {
+            let m = marks.iter().find(|&&m| m > 7).copied().unwrap_or_default();
             return invalid(format!("open-edge mark {m} has bits above bit 2"));
         }
         Ok(Sections {
@@ -170,9 +179,12 @@ pub(crate) fn decode_page_gpu(
             uvs: Vec::new(),
             indices: Vec::new(),
             order: Vec::new(),
+            far: Vec::new(),
+            coded: Default::default(),
+            residuals: Default::default(),
             sources: Sources::default(),
-            wide: Residuals::new(),
-            pairs: Residuals::new(),
+            wide: Box::new([Default::default(); SLOTS]),
+            all: Box::new([Default::default(); SLOTS]),
         });
         let s = Sections::split(bytes, records, flags)?;
         let far = match (s.far, sources) {
@@ -205,44 +217,71 @@ impl Scratch {
         self.indices.clear();
         self.indices.reserve(3 * t_total);
         grow(&mut self.order, v_total);
-        let mut anchors = (<[i32; 3]>::default(), <[u16; 2]>::default(), <[u16; 2]>::default());
+        self.far_copies(s, far)?;
+        plane_values(s.targets, s.target_planes, s.copies, &mut self.coded.0);
+        let mut copies = Copies { coded: &self.coded.0, follow: Targets::new(), next: 0, next_far: 0 };
+        position_residuals(s, &mut self.residuals.0);
+        if normals {
+            pair_residuals(s.normals, s.stored, &mut self.residuals.1);
+        }
+        if uvs {
+            pair_residuals(s.uvs, s.stored, &mut self.residuals.2);
+        }
+        let mut anchor = VertexKey::default();
         let (mut vo, mut so, mut io) = (0usize, 0usize, 0usize);
-        let mut targets = Copies {
-            coded: PlaneReader { bytes: s.targets, planes: s.target_planes, count: s.copies, at: 0 },
-            follow: Targets::new(),
-            far_coded: PlaneReader { bytes: s.far_targets, planes: s.far_planes, count: s.far, at: 0 },
-            follow_far: Targets::new(),
-            sources: far,
-        };
-        let (sources, wide, pairs) = (&mut self.sources, &mut *self.wide, &mut *self.pairs);
+        let (sources, wide, all) = (&mut self.sources, &mut *self.wide, &mut *self.all);
+        let residuals = &self.residuals;
         for (r, len) in records.iter().zip(s.lengths.chunks_exact(2)) {
             let (vc, tc) = (r.vertex_count as usize, r.triangle_count as usize);
             let len = u16::from_le_bytes([len[0], len[1]]) as usize;
             let start = self.indices.len();
             decode_indices(&s.coded[io..io + len], vc, tc, &mut self.indices)?;
             sources.walk(&self.indices[start..], vc, &mut self.edges);
-            let sc = sources.link(s, vo, &mut self.order[..v_total], &mut targets)?;
-            position_residuals(s, so, sc, &mut wide.residuals);
-            sources.spread(&mut wide.residuals, sc);
-            let far = |f: &(u16, VertexKey)| (f.0, f.1 .0);
-            anchors.0 = sources.rebuild(wide, vc, anchors.0, &mut self.positions[..v_total], vo, far);
-            if normals {
-                pair_residuals(s.normals, so, sc, s.stored, &mut pairs.residuals);
-                sources.spread(&mut pairs.residuals, sc);
-                let far = |f: &(u16, VertexKey)| (f.0, f.1 .1);
-                anchors.1 = sources.rebuild(pairs, vc, anchors.1, &mut self.normals[..v_total], vo, far);
-            }
-            if uvs {
-                pair_residuals(s.uvs, so, sc, s.stored, &mut pairs.residuals);
-                sources.spread(&mut pairs.residuals, sc);
-                let far = |f: &(u16, VertexKey)| (f.0, f.1 .2);
-                anchors.2 = sources.rebuild(pairs, vc, anchors.2, &mut self.uvs[..v_total], vo, far);
+            let sc = sources.link(s, vo, so, &mut self.order[..v_total], &mut copies)?;
+            let far = |g: u32| self.far.get(g as usize).copied().unwrap_or_default();
+            let n = vc.min(MAX_CLUSTER_VERTICES);
+            let here = vo..vo + n;
+            if !normals && !uvs {
+                let earlier = |k| at(&self.positions, k);
+                anchor.0 = sources.rebuild(wide, vc, anchor.0, |k| at(&residuals.0, k), earlier, |g| far(g).0);
+                if let Some(page) = self.positions.get_mut(here) {
+                    page.copy_from_slice(&wide[..n]);
+                }
+            } else {
+                // Every attribute in one pass (the ones the file lacks come out zero).
+                let p = &self.positions[..];
+                let nr = if normals { &self.normals[..] } else { &[] };
+                let u = if uvs { &self.uvs[..] } else { &[] };
+                let earlier = |k| (at(p, k), at(nr, k), at(u, k));
+                let residual = |k| (at(&residuals.0, k), at(&residuals.1, k), at(&residuals.2, k));
+                anchor = sources.rebuild(all, vc, anchor, residual, earlier, far);
+                column(&mut self.positions, here.clone(), &all[..n], |v| v.0);
+                if normals {
+                    column(&mut self.normals, here.clone(), &all[..n], |v| v.1);
+                }
+                if uvs {
+                    column(&mut self.uvs, here, &all[..n], |v| v.2);
+                }
             }
             (vo, so, io) = (vo + vc, so + sc, io + len);
         }
         let max_normal = ((1u32 << normal_bits.min(16)) - 1) as u16;
         if let Some(n) = self.normals[..if normals { v_total } else { 0 }].iter().flatten().find(|&&n| n > max_normal) {
             return invalid(format!("octahedral value {n} above {max_normal}"));
+        }
+        Ok(())
+    }
+
+    /// The values of the page's far copies (FORMAT.md §4.3), in order, read from its sources,
+    /// every source vertex number checked.
+    fn far_copies(&mut self, s: &Sections, sources: Option<&SourceVertices>) -> Result<(), Invalid> {
+        self.far.clear();
+        let Some(sources) = sources.filter(|_| s.far > 0) else { return Ok(()) };
+        plane_values(s.far_targets, s.far_planes, s.far, &mut self.coded.1);
+        let (mut follow, mut near) = (Targets::new(), 0);
+        for &z in &self.coded.1 {
+            let u = follow.follow_far(z, sources.total)?;
+            self.far.push(sources.vertex(u, &mut near)?);
         }
         Ok(())
     }
@@ -341,12 +380,26 @@ impl Scratch {
             pack(&mut indices[(3 * tc).next_multiple_of(4)..], marks, [3]);
         }
         if flags & FLAG_MATERIALS != 0 {
-            let t_total = s.materials.len() / 2;
+            let (low, high) = s.materials.split_at(s.materials.len() / 2);
             let r = block(ClusterHeader::MATERIALS);
-            for (i, out) in raw[r].chunks_exact_mut(2).enumerate() {
-                out.copy_from_slice(&[s.materials[to + i], s.materials[t_total + to + i]]);
+            let pairs = low[to..to + tc].iter().zip(&high[to..to + tc]);
+            for (out, (&l, &h)) in raw[r].as_chunks_mut::<2>().0.iter_mut().zip(pairs) {
+                *out = [l, h];
             }
         }
+    }
+}
+
+/// Value `k` of `values`, or zero past them (an attribute the file lacks).
+fn at<T: Copy + Default>(values: &[T], k: u32) -> T {
+    values.get(k as usize).copied().unwrap_or_default()
+}
+
+/// One attribute of rebuilt vertices (`value` of each of `all`) into the page's values at
+/// `places`.
+fn column<T>(page: &mut [T], places: std::ops::Range<usize>, all: &[VertexKey], value: fn(&VertexKey) -> T) {
+    if let Some(out) = page.get_mut(places) {
+        out.iter_mut().zip(all).for_each(|(o, v)| *o = value(v));
     }
 }
 
@@ -355,17 +408,6 @@ fn grow<T: Default + Clone>(v: &mut Vec<T>, len: usize) {
     if v.len() < len {
         v.resize(len, T::default());
     }
-}
-
-/// The copies' targets and the far copies' source vertices as the page's clusters read them,
-/// in order.
-struct Copies<'a> {
-    coded: PlaneReader<'a>,
-    follow: Targets,
-    far_coded: PlaneReader<'a>,
-    follow_far: Targets,
-    /// The page's source vertices (present iff the page has far copies).
-    sources: Option<&'a SourceVertices<'a>>,
 }
 
 /// Slot of a cluster's anchor (the previous cluster's first vertex) in [`Sources::rebuild`]'s
@@ -380,22 +422,20 @@ const COPIES: u16 = 512;
 const SLOTS: usize = 1024;
 
 /// A cluster's vertices in decoding order, each with the three value slots its prediction
-/// `a + b − d` reads: a parallelogram reads three decoded vertices, a neighbour `(n, ZERO,
-/// ZERO)`, the anchor `(ANCHOR, ZERO, ZERO)`, and a vertex that copies an earlier one
-/// (FORMAT.md §4.3, references) `(n, ZERO, ZERO)` or `(COPIES + i, ZERO, ZERO)` with a zero
-/// residual. One branch-free form for every vertex, so that each attribute is rebuilt in one
-/// tight loop.
+/// `a + b − d` reads and the place of its residuals: a parallelogram reads three decoded
+/// vertices, a neighbour `(n, ZERO, ZERO)`, the anchor `(ANCHOR, ZERO, ZERO)`, and a vertex that
+/// copies an earlier one (FORMAT.md §4.3, references) `(n, ZERO, ZERO)` or `(COPIES + i, ZERO,
+/// ZERO)` with the zero residual. One branch-free form for every vertex, so that each attribute
+/// is rebuilt in one tight loop.
 struct Sources {
     vertex: [u8; MAX_CLUSTER_VERTICES],
     slots: [[u16; 3]; MAX_CLUSTER_VERTICES],
-    /// Per vertex in decoding order: it copies an earlier vertex (no residuals stored).
-    copied: [bool; MAX_CLUSTER_VERTICES],
-    /// Whether any vertex of the cluster is copied.
-    copies: bool,
+    /// Per vertex in decoding order: its residuals' place among the page's.
+    residual: [u32; MAX_CLUSTER_VERTICES],
     /// The copied vertices of earlier clusters: (slot, place in the page).
     links: Vec<(u16, u32)>,
-    /// The far-copied vertices: (slot, their values read from the source layout).
-    far: Vec<(u16, VertexKey)>,
+    /// The far-copied vertices: (slot, which far copy of the page).
+    far: Vec<(u16, u32)>,
     len: usize,
 }
 
@@ -404,8 +444,7 @@ impl Default for Sources {
         Sources {
             vertex: [0; MAX_CLUSTER_VERTICES],
             slots: [[0; 3]; MAX_CLUSTER_VERTICES],
-            copied: [false; MAX_CLUSTER_VERTICES],
-            copies: false,
+            residual: [0; MAX_CLUSTER_VERTICES],
             links: Vec::with_capacity(MAX_CLUSTER_VERTICES),
             far: Vec::with_capacity(MAX_CLUSTER_VERTICES),
             len: 0,
@@ -432,128 +471,130 @@ impl Sources {
     }
 
     /// Reads the references of the walked cluster, whose vertices start at page vertex `vo`
-    /// (which is also where the cluster starts in decoding order): records each vertex's
-    /// place in `order` (page decoding order → place in the page) and points each copied
-    /// vertex at the slot of the vertex it copies, one of this cluster's or one filled from an
-    /// earlier cluster's. Returns how many of its vertices are stored with residuals.
-    fn link(&mut self, s: &Sections, vo: usize, order: &mut [u32], targets: &mut Copies) -> Result<usize, Invalid> {
+    /// (which is also where the cluster starts in decoding order) and its residuals at `so`
+    /// of the page's: records each vertex's place in `order` (page decoding order → place in
+    /// the page) and its residuals' place, and points each copied vertex at the slot of the
+    /// vertex it copies, one of this cluster's or one filled from an earlier cluster's or a
+    /// source page's. Returns how many of its vertices are stored with residuals.
+    fn link(
+        &mut self,
+        s: &Sections,
+        vo: usize,
+        so: usize,
+        order: &mut [u32],
+        copies: &mut Copies,
+    ) -> Result<usize, Invalid> {
         let n = self.len;
         self.links.clear();
         self.far.clear();
-        self.copies = false;
         if s.copies == 0 && s.far == 0 {
+            for (i, r) in self.residual[..n].iter_mut().enumerate() {
+                *r = (so + i) as u32;
+            }
             return Ok(n);
         }
-        self.copied[..n].fill(false);
         for (&v, place) in self.vertex[..n].iter().zip(&mut order[vo..]) {
             *place = (vo + v as usize) as u32;
         }
-        let flags = &s.references[vo..][..n.min(order.len() - vo)];
-        let mut copies = 0;
-        for (i, &flag) in flags.iter().enumerate().filter(|(_, &f)| f != 0) {
-            (self.copied[i], self.copies) = (true, true);
-            copies += 1;
-            if flag == 2 {
-                let Some(far) = targets.sources else { return invalid("a far copy in a page without far copies") };
-                let u = targets.follow_far.follow_far(targets.far_coded.next(), far.total)?;
-                self.far.push((COPIES + i as u16, far.vertex(u)?));
-                self.slots[i] = [COPIES + i as u16, ZERO, ZERO];
-                continue;
-            }
-            let j = vo + i;
-            let target = targets.follow.follow(targets.coded.next(), j)?;
-            self.slots[i] = if target >= vo {
-                [self.vertex[target - vo] as u16, ZERO, ZERO]
-            } else {
-                self.links.push((COPIES + i as u16, order[target]));
-                [COPIES + i as u16, ZERO, ZERO]
+        let zero = s.stored as u32;
+        let mut k = so;
+        for (i, &flag) in s.references[vo..][..n.min(order.len() - vo)].iter().enumerate() {
+            let copy = COPIES + i as u16;
+            (self.residual[i], self.slots[i]) = match flag {
+                0 => {
+                    k += 1;
+                    ((k - 1) as u32, self.slots[i])
+                }
+                1 => {
+                    let z = copies.coded.get(copies.next).copied().unwrap_or(0);
+                    copies.next += 1;
+                    match copies.follow.follow(z, vo + i)? {
+                        t if t >= vo => (zero, [self.vertex[(t - vo) % MAX_CLUSTER_VERTICES] as u16, ZERO, ZERO]),
+                        t => {
+                            self.links.push((copy, order[t]));
+                            (zero, [copy, ZERO, ZERO])
+                        }
+                    }
+                }
+                _ => {
+                    self.far.push((copy, copies.next_far as u32));
+                    copies.next_far += 1;
+                    (zero, [copy, ZERO, ZERO])
+                }
             };
         }
-        Ok(n - copies)
+        Ok(k - so)
     }
 
-    /// Moves the `stored` residuals read for the stored vertices to their places in decoding
-    /// order, zero for the copied ones (in place, from the end: a stored vertex's place is at
-    /// or after its residual's).
-    fn spread<T: Lanes>(&self, residuals: &mut [T; MAX_CLUSTER_VERTICES], stored: usize) {
-        if !self.copies {
-            return;
-        }
-        let mut k = stored;
-        for i in (0..self.len).rev() {
-            if self.copied[i] {
-                residuals[i] = T::default();
-            } else {
-                k = k.saturating_sub(1);
-                residuals[i] = residuals[k];
-            }
-        }
-    }
-
-    /// Each vertex's value (prediction plus residual, `residuals` in decoding order) into
-    /// the page's values `page`, the cluster's starting at `vo`; returns the first decoded
-    /// vertex's value, the next cluster's anchor. Every slot a prediction reads was written
-    /// before: the walk predicts only from vertices it has visited, and a copy reads a vertex
-    /// decoded before it.
-    #[allow(clippy::too_many_arguments)]
+    /// Each vertex's value (prediction plus residual) into `values`, at its local index:
+    /// `residual` gives the residuals at a place among the page's (the zero past them for a
+    /// copy), `earlier` the values of a vertex of an earlier cluster at its place in the page,
+    /// `far` the values of the page's far copies; returns the first decoded vertex's value, the
+    /// next cluster's anchor. Every slot a prediction reads was written before: the walk
+    /// predicts only from vertices it has visited, and a copy reads a vertex decoded before it.
     fn rebuild<T: Lanes>(
         &self,
-        r: &mut Residuals<T>,
+        values: &mut [T; SLOTS],
         vc: usize,
         anchor: T,
-        page: &mut [T],
-        vo: usize,
-        far: impl Fn(&(u16, VertexKey)) -> (u16, T),
+        residual: impl Fn(u32) -> T,
+        earlier: impl Fn(u32) -> T,
+        far: impl Fn(u32) -> T,
     ) -> T {
-        let (before, here) = page.split_at_mut(vo);
-        let values = &mut r.values;
         values[ANCHOR as usize] = anchor;
         values[ZERO as usize] = T::default();
         for &(slot, at) in &self.links {
-            values[slot as usize % SLOTS] = before.get(at as usize).copied().unwrap_or_default();
+            values[slot as usize % SLOTS] = earlier(at);
         }
-        for (slot, value) in self.far.iter().map(far) {
-            values[slot as usize % SLOTS] = value;
+        for &(slot, g) in &self.far {
+            values[slot as usize % SLOTS] = far(g);
         }
         let n = self.len.min(vc);
-        for ((&v, s), &r) in self.vertex[..n].iter().zip(&self.slots[..n]).zip(&r.residuals[..n]) {
+        for ((&v, s), &k) in self.vertex[..n].iter().zip(&self.slots[..n]).zip(&self.residual[..n]) {
             let at = |i: u16| values[i as usize % SLOTS];
-            values[v as usize] = at(s[0]).add(at(s[1])).sub(at(s[2])).add(r);
+            values[v as usize] = at(s[0]).add(at(s[1])).sub(at(s[2])).add(residual(k));
         }
-        let len = vc.min(here.len()).min(MAX_CLUSTER_VERTICES);
-        here[..len].copy_from_slice(&values[..len]);
         values[self.vertex[0] as usize]
     }
 }
 
-/// The position residuals of the `sc` stored vertices of a cluster, the page's stored
-/// vertices from `so` on, from the page's byte planes (in decoding order; [`Sources::spread`]
-/// then puts them in place).
-fn position_residuals(s: &Sections, so: usize, sc: usize, out: &mut [[i32; 3]]) {
-    let out = &mut out[..sc];
-    let plane = |p: usize| s.positions[p * 3 * s.stored + 3 * so..][..3 * sc].chunks_exact(3);
-    for (o, b) in out.iter_mut().zip(plane(0)) {
-        *o = [b[0] as i32, b[1] as i32, b[2] as i32];
-    }
-    for p in 1..s.planes {
-        for (o, b) in out.iter_mut().zip(plane(p)) {
-            for k in 0..3 {
-                o[k] |= (b[k] as i32) << (8 * p);
-            }
+/// The `count` values of `planes` byte planes (FORMAT.md §4.3, byte planes) into `out`.
+fn plane_values(bytes: &[u8], planes: usize, count: usize, out: &mut Vec<u32>) {
+    out.clear();
+    out.resize(count, 0);
+    for p in 0..planes {
+        let plane = bytes.get(p * count..(p + 1) * count).unwrap_or_default();
+        for (o, &b) in out.iter_mut().zip(plane) {
+            *o |= (b as u32) << (8 * p);
         }
-    }
-    for o in out.iter_mut() {
-        *o = o.map(|z| unzigzag32(z as u32));
     }
 }
 
-/// The residuals of a two-plane pair section (normals or UVs) for the `sc` stored vertices of
-/// a cluster, the page's stored vertices (`stored` in all) from `so` on.
-fn pair_residuals(planes: &[u8], so: usize, sc: usize, stored: usize, out: &mut [[u16; 2]]) {
-    let low = &planes[2 * so..][..2 * sc];
-    let high = &planes[2 * stored + 2 * so..][..2 * sc];
-    for ((out, l), h) in out.iter_mut().zip(low.chunks_exact(2)).zip(high.chunks_exact(2)) {
-        *out = [unzigzag16(u16::from_le_bytes([l[0], h[0]])), unzigzag16(u16::from_le_bytes([l[1], h[1]]))];
+/// The position residuals of the page's stored vertices from its byte planes, in decoding
+/// order, then a zero (a copy's).
+fn position_residuals(s: &Sections, out: &mut Vec<[i32; 3]>) {
+    out.clear();
+    out.resize(s.stored + 1, [0; 3]);
+    let flat = &mut out.as_flattened_mut()[..3 * s.stored];
+    for p in 0..s.planes {
+        let plane = s.positions.get(p * 3 * s.stored..(p + 1) * 3 * s.stored).unwrap_or_default();
+        for (o, &b) in flat.iter_mut().zip(plane) {
+            *o |= (b as i32) << (8 * p);
+        }
+    }
+    for o in flat {
+        *o = unzigzag32(*o as u32);
+    }
+}
+
+/// The residuals of a two-plane pair section (normals or UVs) of the page's `stored`
+/// vertices, in decoding order, then a zero.
+fn pair_residuals(planes: &[u8], stored: usize, out: &mut Vec<[u16; 2]>) {
+    out.clear();
+    out.resize(stored + 1, [0; 2]);
+    let (low, high) = planes.split_at(planes.len() / 2);
+    for ((o, &l), &h) in out.as_flattened_mut().iter_mut().zip(low).zip(high) {
+        *o = unzigzag16(u16::from_le_bytes([l, h]));
     }
 }
 
@@ -566,11 +607,16 @@ fn decode_indices(coded: &[u8], vertex_count: usize, triangle_count: usize, out:
     let wide: Vec<u16> =
         meshopt::decode_index_buffer(coded, 3 * triangle_count).map_err(|e| Invalid(format!("index codec: {e}")))?;
     // The largest index alone decides (a branch-free scan, where finding the first
-    // offender branched per index).
-    if let Some(&i) = wide.iter().max().filter(|&&i| i as usize >= vertex_count) {
+    // offender branched per index), taken over the narrowed indices with their high bytes
+    // apart: a byte-wide maximum takes one SSE2 instruction per 16 indices, a u16 one none.
+    let start = out.len();
+    out.extend(wide.iter().map(|&i| i as u8));
+    let high = wide.iter().fold(0, |acc, &i| acc | i) >> 8;
+    let largest = out[start..].iter().fold(0, |acc, &i| acc.max(i));
+    if high != 0 || largest as usize >= vertex_count {
+        let i = wide.iter().max().copied().unwrap_or_default();
         return invalid(format!("local index {i} out of {vertex_count} vertices"));
     }
-    out.extend(wide.iter().map(|&i| i as u8));
     Ok(())
 }
 
@@ -615,29 +661,59 @@ fn place_blocks(headers: &mut [ClusterHeader], flags: u32) -> usize {
     end
 }
 
-/// Packs records of bit fields of the given widths (each value below 2^width) LSB first into
-/// little-endian u32 words (FORMAT.md §5.2); `out` is exactly the words' bytes, zeroed.
+/// Packs records of bit fields of the given widths (each value below 2^width, at most 32
+/// bits) LSB first into little-endian u32 words (FORMAT.md §5.2); `out` is exactly the words'
+/// bytes. A record of at most 32 bits is put together first and pushed at once: one push per
+/// record instead of one per field (normals, open-edge marks, small clusters' positions); a
+/// wider one is pushed field by field, which measured cheaper than a 128-bit accumulator.
 fn pack<const N: usize>(out: &mut [u8], values: impl Iterator<Item = [u32; N]>, widths: [u32; N]) {
-    let (mut acc, mut fill, mut at) = (0u64, 0u32, 0usize);
-    let mut flush = |word: u32, at: &mut usize| {
-        if let Some(w) = out.get_mut(*at..*at + 4) {
-            w.copy_from_slice(&word.to_le_bytes());
+    let mut packer = Packer { words: out.chunks_exact_mut(4), acc: 0, fill: 0 };
+    let stride: u32 = widths.iter().sum();
+    if stride <= 32 {
+        let shifts: [u32; N] = std::array::from_fn(|k| widths[..k].iter().sum());
+        for v in values {
+            packer.push((0..N).fold(0, |record, k| record | (v[k] as u64) << shifts[k]), stride);
         }
-        *at += 4;
-    };
-    for v in values {
-        for k in 0..N {
-            acc |= (v[k] as u64) << fill;
-            fill += widths[k];
-            if fill >= 32 {
-                flush(acc as u32, &mut at);
-                acc >>= 32;
-                fill -= 32;
+    } else {
+        for v in values {
+            for k in 0..N {
+                packer.push(v[k] as u64, widths[k]);
             }
         }
     }
-    if fill > 0 {
-        flush(acc as u32, &mut at);
+    packer.finish();
+}
+
+/// A bit stream being written into words, fewer than 32 bits pending.
+struct Packer<'a> {
+    words: std::slice::ChunksExactMut<'a, u8>,
+    acc: u64,
+    fill: u32,
+}
+
+impl Packer<'_> {
+    /// Appends `value`, below 2^`bits`, `bits` at most 32.
+    fn push(&mut self, value: u64, bits: u32) {
+        self.acc |= value << self.fill;
+        self.fill += bits;
+        if self.fill >= 32 {
+            self.flush();
+            self.acc >>= 32;
+            self.fill -= 32;
+        }
+    }
+
+    fn flush(&mut self) {
+        if let Some(word) = self.words.next() {
+            word.copy_from_slice(&(self.acc as u32).to_le_bytes());
+        }
+    }
+
+    /// Writes the last, partial word.
+    fn finish(mut self) {
+        if self.fill > 0 {
+            self.flush();
+        }
     }
 }
 
@@ -661,12 +737,60 @@ struct SourceCluster<'a> {
     with_normals: bool,
     with_uvs: bool,
     position_min: [i32; 3],
-    position_bits: [u32; 3],
-    positions: Option<&'a [u8]>,
+    positions: Records<'a, 3>,
     normal_min: [u16; 2],
-    normal_bits: [u32; 2],
-    normals: Option<&'a [u8]>,
+    normals: Records<'a, 2>,
     uvs: Option<&'a [u8]>,
+}
+
+/// A block of bit-packed records of `N` fields (FORMAT.md §5.2), each at most 32 bits wide.
+struct Records<'a, const N: usize> {
+    block: Option<&'a [u8]>,
+    widths: [u32; N],
+    /// Bits per record.
+    stride: u64,
+}
+
+impl<'a, const N: usize> Records<'a, N> {
+    fn new(block: impl FnOnce(usize) -> Option<&'a [u8]>, vertex_count: usize, widths: [u32; N]) -> Records<'a, N> {
+        let stride: u32 = widths.iter().sum();
+        let block = block((vertex_count * stride as usize).div_ceil(32) * 4);
+        Records { block, widths, stride: stride as u64 }
+    }
+
+    /// Record `v`'s fields; `None` if they lie outside the block (as [`bits::read_bits`] reads
+    /// them: the block is whole words, so a field lies inside if its last bit does).
+    fn get(&self, v: u64) -> Option<[u32; N]> {
+        let block = self.block?;
+        let at = v.checked_mul(self.stride)?;
+        if self.stride > 0 && at + self.stride > 8 * block.len() as u64 {
+            return None;
+        }
+        // Sixteen bytes from the record's first byte hold all of it (at most 96 bits after a
+        // shift of at most 7): one load instead of a checked read per field; eight bytes for
+        // a record of at most 57 bits (most), which then splits in 64-bit arithmetic.
+        let tail = block.get((at / 8) as usize..).unwrap_or_default();
+        let mask = |w: u32| (1u64 << w) - 1;
+        if let (true, Some(window)) = (self.stride <= 57, tail.first_chunk::<8>()) {
+            let mut record = u64::from_le_bytes(*window) >> (at % 8);
+            return Some(self.widths.map(|w| {
+                let field = (record & mask(w)) as u32;
+                record >>= w;
+                field
+            }));
+        }
+        let mut window = [0u8; 16];
+        match tail.first_chunk::<16>() {
+            Some(w) => window = *w,
+            None => window.iter_mut().zip(tail).for_each(|(w, &b)| *w = b),
+        }
+        let mut record = u128::from_le_bytes(window) >> (at % 8);
+        Some(self.widths.map(|w| {
+            let field = (record as u64 & mask(w)) as u32;
+            record >>= w;
+            field
+        }))
+    }
 }
 
 impl<'a> SourceVertices<'a> {
@@ -682,12 +806,26 @@ impl<'a> SourceVertices<'a> {
         Ok(SourceVertices { total: starts[starts.len() - 1], starts, clusters })
     }
 
-    /// The values of source vertex `u` (below [`SourceVertices::total`]).
-    fn vertex(&self, u: usize) -> Result<VertexKey, Invalid> {
-        let c = self.starts.partition_point(|&s| s <= u).saturating_sub(1);
+    /// The values of source vertex `u` (below [`SourceVertices::total`]); `near` is the source
+    /// cluster of the previous far copy, and becomes `u`'s.
+    fn vertex(&self, u: usize, near: &mut usize) -> Result<VertexKey, Invalid> {
+        let c = self.cluster_of(u, *near);
+        *near = c;
         match (self.clusters.get(c), self.starts.get(c)) {
             (Some(cluster), Some(&start)) => cluster.vertex(u - start),
             _ => invalid(format!("source vertex {u} out of range")),
+        }
+    }
+
+    /// The source cluster holding source vertex `u`. A page's far copies name source vertices
+    /// in mostly increasing order, so the cluster `near` or the one after it is tried before a
+    /// binary search, which cost a seventh of the decoding time.
+    fn cluster_of(&self, u: usize, near: usize) -> usize {
+        let holds = |c: usize| matches!(self.starts.get(c..c + 2), Some(&[a, b]) if a <= u && u < b);
+        match (holds(near), holds(near + 1)) {
+            (true, _) => near,
+            (_, true) => near + 1,
+            _ => self.starts.partition_point(|&s| s <= u).saturating_sub(1),
         }
     }
 }
@@ -707,25 +845,22 @@ impl<'a> SourceCluster<'a> {
             return invalid(format!("source page {}: a cluster header disagrees with its record", s.index));
         }
         let vc = h.vertex_count as usize;
-        let block = |slot: usize, len: usize| {
-            let at = h.block_offsets[slot] as usize;
-            (at != 0).then(|| s.layout.get(at..at.saturating_add(len))).flatten()
+        let block = |slot: usize| {
+            move |len: usize| {
+                let at = h.block_offsets[slot] as usize;
+                (at != 0).then(|| s.layout.get(at..at.saturating_add(len))).flatten()
+            }
         };
-        let words = |bits: usize| (vc * bits).div_ceil(32) * 4;
-        let position_bits = h.position_bits.map(u32::from);
-        let normal_bits = h.normal_bits.map(u32::from);
         let with = |flag: u32| flags & flag != 0;
         Ok(SourceCluster {
             page: s.index,
             with_normals: with(FLAG_NORMALS),
             with_uvs: with(FLAG_UVS),
             position_min: h.position_min,
-            positions: block(ClusterHeader::POSITIONS, words(position_bits.iter().sum::<u32>() as usize)),
-            position_bits,
+            positions: Records::new(block(ClusterHeader::POSITIONS), vc, h.position_bits.map(u32::from)),
             normal_min: h.normal_min,
-            normals: block(ClusterHeader::NORMALS, words((normal_bits[0] + normal_bits[1]) as usize)),
-            normal_bits,
-            uvs: block(ClusterHeader::UVS, 4 * vc),
+            normals: Records::new(block(ClusterHeader::NORMALS), vc, h.normal_bits.map(u32::from)),
+            uvs: block(ClusterHeader::UVS)(4 * vc),
         })
     }
 
@@ -733,31 +868,52 @@ impl<'a> SourceCluster<'a> {
     fn vertex(&self, v: usize) -> Result<VertexKey, Invalid> {
         let outside =
             || Invalid(format!("source page {}: a far copy's source vertex lies outside its layout", self.page));
-        let v = v as u64;
-        let (pb, nb) = (self.position_bits, self.normal_bits);
-        let positions = self.positions.ok_or_else(outside)?;
-        let mut at = v * (pb[0] + pb[1] + pb[2]) as u64;
+        let deltas = self.positions.get(v as u64).ok_or_else(outside)?;
         let mut position = [0i32; 3];
         for k in 0..3 {
-            let d = bits::read_bits(positions, at, pb[k]).ok_or_else(outside)?;
-            at += pb[k] as u64;
-            position[k] = i32::try_from(self.position_min[k] as i64 + d as i64)
+            position[k] = i32::try_from(self.position_min[k] as i64 + deltas[k] as i64)
                 .map_err(|_| Invalid(format!("source page {}: a position overflows i32", self.page)))?;
         }
         let mut key: VertexKey = (position, [0; 2], [0; 2]);
         if self.with_normals {
-            let normals = self.normals.ok_or_else(outside)?;
-            let mut at = v * (nb[0] + nb[1]) as u64;
-            for ((value, &bits), &min) in key.1.iter_mut().zip(&nb).zip(&self.normal_min) {
-                let d = bits::read_bits(normals, at, bits).ok_or_else(outside)?;
-                at += bits as u64;
+            let deltas = self.normals.get(v as u64).ok_or_else(outside)?;
+            for ((value, &min), &d) in key.1.iter_mut().zip(&self.normal_min).zip(&deltas) {
                 *value = u16::try_from(min as u32 + d).map_err(|_| outside())?;
             }
         }
         if self.with_uvs {
-            let q = self.uvs.ok_or_else(outside)?.get(4 * v as usize..4 * v as usize + 4).ok_or_else(outside)?;
+            let q = self.uvs.and_then(|b| b.get(4 * v..4 * v + 4)).ok_or_else(outside)?;
             key.2 = [u16::from_le_bytes([q[0], q[1]]), u16::from_le_bytes([q[2], q[3]])];
         }
         Ok(key)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every record of a block reads as [`bits::read_bits`] reads its fields, narrow records
+    /// and wide ones, the last ones too (fewer than sixteen bytes from their start to the
+    /// block's end); one past them is `None`.
+    #[test]
+    fn records_read_as_their_bit_fields() {
+        for widths in [[13, 32, 7], [32, 31, 30]] {
+            let mut writer = bits::BitWriter::default();
+            for v in 0..9u32 {
+                for (k, &w) in widths.iter().enumerate() {
+                    writer.push(v.wrapping_mul(2654435761) >> k, w);
+                }
+            }
+            let block: Vec<u8> = writer.finish().iter().flat_map(|w| w.to_le_bytes()).collect();
+            let records = Records::new(|len| block.get(..len), 9, widths);
+            let stride: u32 = widths.iter().sum();
+            for v in 0..9u64 {
+                let at = |k: usize| v * stride as u64 + widths[..k].iter().sum::<u32>() as u64;
+                let fields: [u32; 3] = std::array::from_fn(|k| bits::read_bits(&block, at(k), widths[k]).unwrap());
+                assert_eq!(records.get(v), Some(fields), "widths {widths:?}, record {v}");
+            }
+            assert_eq!(records.get(9), None);
+        }
     }
 }
