@@ -13,7 +13,7 @@
 //! chords that no other group can have ([`Chords::unshared`]). The result does not depend on
 //! the order in which groups finish.
 
-use mres_geom::edges::edge_key;
+use mres_geom::edges::{edge_ends, edge_key};
 
 /// Per level: the groups using each shared position, and the edges between two shared
 /// positions that the level's input already has.
@@ -65,14 +65,14 @@ impl Chords {
     /// has it (another group keeps it) or an end is locked for a reason beyond the level
     /// (`kept`: a cell border, a non-manifold edge).
     pub fn free(&self, e: u64, kept: impl Fn(u32) -> bool) -> bool {
-        let (a, b) = ((e >> 32) as u32, e as u32);
+        let [a, b] = edge_ends(e);
         !kept(a) && !kept(b) && self.existing.binary_search(&e).is_err()
     }
 
     /// The second round's rule for group `g`: [`Chords::free`], and no other group holds both
     /// ends (a position only `g` uses is in no other group).
     pub fn unshared(&self, g: u32, e: u64, kept: impl Fn(u32) -> bool) -> bool {
-        let (a, b) = ((e >> 32) as u32, e as u32);
+        let [a, b] = edge_ends(e);
         let (ga, gb) = (self.groups(a), self.groups(b));
         self.free(e, kept) && !ga.iter().any(|u| u.1 != g && gb.iter().any(|v| v.1 == u.1))
     }

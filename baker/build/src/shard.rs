@@ -36,6 +36,7 @@ use crate::settings::BakeSettings;
 use crate::source::TriangleSource;
 use crate::weld::{uv_quant, weld_grid, weld_on, GridMesh, WeldedMesh};
 use mres_format::{Grid, UvQuant, NO_GROUP};
+use mres_geom::edges::edge_ends;
 use mres_import::mesh::bounds;
 use mres_import::mesh::{Corner, NONE};
 use mres_import::SourceMesh;
@@ -366,7 +367,10 @@ impl ShardContext<'_> {
         let q = |p: u32| point[p as usize];
         let open: Vec<u64> = open::odd_edges(&welded, &welded.indices)
             .into_iter()
-            .filter(|&e| global_open.contains(&grid_edge(q((e >> 32) as u32), q(e as u32))))
+            .filter(|&e| {
+                let [a, b] = edge_ends(e);
+                global_open.contains(&grid_edge(q(a), q(b)))
+            })
             .collect();
         let cell = self.levels(&welded, level0(&welded, self.settings, &open), 0, false, output)?;
         Ok(Cell {

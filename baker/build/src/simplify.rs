@@ -7,6 +7,7 @@ use crate::open;
 use crate::settings::BakeSettings;
 use crate::weld::WeldedMesh;
 use meshopt::{SimplifyOptions, VertexDataAdapter};
+use mres_geom::edges::edge_ends;
 use mres_geom::parts::{diagonals, UnionFind};
 
 /// Which simplifier produced a group's result.
@@ -120,7 +121,7 @@ pub fn simplify_group(
                 Err(bad) => {
                     // Lock the offending edges' ends and their neighbours, and aim a little
                     // less low: such pinches come from the last collapses.
-                    let mut lock_positions: Vec<u32> = bad.iter().flat_map(|&e| [(e >> 32) as u32, e as u32]).collect();
+                    let mut lock_positions: Vec<u32> = bad.iter().flat_map(|&e| edge_ends(e)).collect();
                     lock_positions.sort_unstable();
                     let ring: Vec<u32> = indices
                         .chunks_exact(3)
@@ -233,10 +234,6 @@ fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
     mres_geom::edges::sorted_edge_keys(indices, |v| mesh.position_ids[v as usize])
 }
 
-fn ends(e: u64) -> [u32; 2] {
-    [(e >> 32) as u32, e as u32]
-}
-
 impl<'a> EdgeCounts<'a> {
     /// The border of the group `indices` whose triangles carry `masks`; `locked` tells the
     /// locked positions, `chord` which new edges between two of them are allowed.
@@ -256,10 +253,14 @@ impl<'a> EdgeCounts<'a> {
             .filter_map(|r| {
                 let m = marks(r[0]);
                 let unmarked_odd = (r.len() - m) % 2 == 1;
-                (unmarked_odd || ends(r[0]).iter().all(|&p| is_locked(p))).then_some((r[0], r.len() as u32, m as u32))
+                (unmarked_odd || edge_ends(r[0]).iter().all(|&p| is_locked(p))).then_some((
+                    r[0],
+                    r.len() as u32,
+                    m as u32,
+                ))
             })
             .collect();
-        let mut open: Vec<u32> = marked.iter().flat_map(|&e| ends(e)).collect();
+        let mut open: Vec<u32> = marked.iter().flat_map(|&e| edge_ends(e)).collect();
         open.sort_unstable();
         open.dedup();
         EdgeCounts { border, locked: locked.to_vec(), chord, open, lenient: false }
@@ -278,7 +279,7 @@ impl<'a> EdgeCounts<'a> {
         let keys = edge_keys(mesh, out);
         let (mut bad, mut needed, mut chords) = (Vec::new(), Vec::new(), Vec::new());
         let mut seen = vec![false; self.border.len()];
-        let all = |set: &[u32], e: u64| ends(e).iter().all(|p| set.binary_search(p).is_ok());
+        let all = |set: &[u32], e: u64| edge_ends(e).iter().all(|p| set.binary_search(p).is_ok());
         // Both lists are sorted: walk the border along the keys instead of searching it.
         let mut next = 0;
         for run in keys.chunk_by(|a, b| a == b) {

@@ -5,6 +5,11 @@ pub fn edge_key(a: u32, b: u32) -> u64 {
     (a.min(b) as u64) << 32 | a.max(b) as u64
 }
 
+/// The two positions of edge key `e` ([`edge_key`]), the smaller first.
+pub fn edge_ends(e: u64) -> [u32; 2] {
+    [(e >> 32) as u32, e as u32]
+}
+
 /// The edge keys of a triangle list (three per triangle, edge k from corner k), in triangle
 /// order; `position` maps an index to its position id.
 pub fn edge_keys<T: Copy>(triangles: &[T], position: impl Fn(T) -> u32) -> Vec<u64> {
