@@ -36,9 +36,8 @@ pub struct BuiltCluster {
     /// Open-border marks, one 3-bit mask per triangle (see [`crate::open`]).
     pub open: Vec<u8>,
     /// The level-0 sample points this cluster stands for, while the builder measures errors
-    /// against the original surface: (level-0 triangle in welded vertex ids, the bits of its
-    /// samples it owns, see `deviation::Owned`); emptied once grouped.
-    pub owned: Vec<crate::deviation::Owned>,
+    /// against the original surface (see [`crate::samples`]); emptied once grouped.
+    pub owned: Vec<crate::samples::Owned>,
 }
 
 /// Receives the finished clusters of each welded mesh the DAG is built on, while that mesh

@@ -14,6 +14,7 @@
 //! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
 //! with their worst spots locked ([`simplify_measured`]).
 
+use crate::samples::{sample_point, set_bits, Owned, Samples, NOT_FOUND};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Locks, Simplified};
 use crate::weld::WeldedMesh;
@@ -32,11 +33,6 @@ pub const SAMPLING_MARGIN: f64 = 1.0;
 /// the result with the smaller error is kept. Such groups (a few dozen of the dragon's 887)
 /// would otherwise pass their error on to every ancestor. Measured: see docs/BENCHMARKS.md.
 pub const OUTLIER_RATIO: f64 = 4.0;
-
-/// A level-0 triangle whose radius is at most this fraction of the members' error is measured
-/// at its centroid plus its radius (see `Sides::small`): it loosens the bound by at most about
-/// this fraction, and measures one point instead of about three.
-const SMALL_TRIANGLE: f64 = 0.05;
 
 /// Re-simplifications of one outlier group at most; each locks more.
 const OUTLIER_RETRIES: usize = 3;
@@ -63,9 +59,9 @@ pub struct Reference<'a> {
     pub triangles: std::borrow::Cow<'a, [u32]>,
     /// Per triangle, the error of the surface it stands for.
     pub errors: Vec<f32>,
-    /// Per triangle, which of its samples belong to this group (see [`Owned`]); all when
-    /// `None`.
-    pub samples: Option<Vec<u8>>,
+    /// With `triangles` from these (their [`Owned::corners`]): which samples belong to this
+    /// group, and the balls among them; all samples of every triangle when `None`.
+    pub owned: Option<&'a [Owned]>,
     /// The largest own error among the group's members: the stored error is at least this
     /// (monotone errors), and the outlier test counts only what the step adds beyond it.
     pub members_error: f32,
@@ -91,8 +87,7 @@ pub fn simplify_measured(
     part_size: &[f32],
 ) -> Option<Measured> {
     let (members, triangles, errors) = (reference.members_error, &reference.triangles[..], &reference.errors);
-    let small = SMALL_TRIANGLE * members as f64;
-    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.samples.as_deref(), small };
+    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.owned };
     let error_of = |s: &Simplified, hot_above: Option<f64>| {
         let (total, hot, found) =
             measure(mesh, &sides, &s.indices, part_size, s.error as f64, hot_above, reference.original);
@@ -136,123 +131,8 @@ pub struct Measured {
     /// Its stored error.
     pub error: f32,
     /// Per reference sample, the output triangle within `error` of it that measuring found
-    /// (`NOT_FOUND` where not measured), for [`assign_owned`].
+    /// (`NOT_FOUND` where not measured), for [`crate::samples::assign_owned`].
     pub found: Vec<u32>,
-}
-
-/// A level-0 triangle and the bits of its samples a cluster stands for: the Morton code of its
-/// centroid over the mesh (the sort key, so that a group's samples come in spatial order:
-/// queries then start near their answer, and runs of them form patches), its welded vertex
-/// ids, and the bits: corner k (bit k), the midpoint of edge k from corner k (bit 3 + k), the
-/// centroid (bit 6).
-pub type Owned = (u32, [u32; 3], u8);
-
-/// The level-0 samples of a group's members, one entry per triangle (bits of one triangle
-/// owned by several members are joined), sorted (so in Morton order).
-pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
-    let mut all: Vec<Owned> = owned.collect();
-    // Each member's list is sorted (see `assign_owned`, and level 0's): the stable sort merges
-    // such runs instead of sorting from scratch, and on a total order it gives the same result.
-    all.sort();
-    // In place: a triangle's entries are adjacent, the first one kept gets the bits of all.
-    all.dedup_by(|next, kept| {
-        let same = next.1 == kept.1;
-        if same {
-            kept.2 |= next.2;
-        }
-        same
-    });
-    all
-}
-
-/// The indices of the bits set among the low seven of `mask`, ascending: the samples a
-/// triangle's bits name (see [`Owned`]), found without testing all seven.
-fn set_bits(mask: u8) -> impl Iterator<Item = usize> {
-    let mut rest = mask & 0x7f;
-    std::iter::from_fn(move || {
-        let b = rest.trailing_zeros() as usize;
-        rest &= rest.wrapping_sub(1); // clears the lowest set bit
-        (b < 8).then_some(b)
-    })
-}
-
-/// The sample point of bit `b` of triangle `t` (see [`Owned`]).
-fn sample_point(t: &Triangle<f32>, b: usize) -> [f32; 3] {
-    match b {
-        0..=2 => t[b],
-        3..=5 => [0, 1, 2].map(|k| (t[b - 3][k] + t[(b - 2) % 3][k]) * 0.5),
-        _ => [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) * (1.0 / 3.0)),
-    }
-}
-
-/// Hands each level-0 sample of `owned` (the group's reference, in order) to a cluster of
-/// `children` (the split of `output`, the group's result, whose stored error is `error`) within
-/// `error` of it: the one holding the output triangle measuring found for it (`found`, see
-/// [`Measured`]), else one found by a search. The next level measures the sample against that
-/// cluster's group. A sample must go to a cluster near itself, not just near its triangle:
-/// where a group border later runs between two clusters, a level-0 triangle can straddle it, and
-/// its far corner would be measured across the border. Every sample stays under exactly one
-/// pending cluster.
-pub fn assign_owned(
-    mesh: &WeldedMesh,
-    owned: &[Owned],
-    (output, found): (&[u32], &[u32]),
-    children: &[Vec<u32>],
-    error: f32,
-) -> Vec<Vec<Owned>> {
-    let point = |v: u32| mesh.positions[v as usize];
-    let key = |t: &[u32]| {
-        let mut k = [t[0], t[1], t[2]];
-        k.sort_unstable();
-        k
-    };
-    let mut child_of: rustc_hash::FxHashMap<[u32; 3], u32> = rustc_hash::FxHashMap::default();
-    for (i, c) in children.iter().enumerate() {
-        for t in c.chunks_exact(3) {
-            child_of.insert(key(t), i as u32);
-        }
-    }
-    let output_child: Vec<u32> = output.chunks_exact(3).map(|t| child_of.get(&key(t)).copied().unwrap_or(0)).collect();
-    let tris: Vec<Triangle<f32>> = output.chunks_exact(3).map(|t| [point(t[0]), point(t[1]), point(t[2])]).collect();
-    // A corner the output kept was not measured: it goes with an output triangle using it.
-    let id = |v: u32| mesh.position_ids[v as usize];
-    let mut at_corner: rustc_hash::FxHashMap<u32, u32> = rustc_hash::FxHashMap::default();
-    for (s, &v) in output.iter().enumerate() {
-        at_corner.entry(id(v)).or_insert(s as u32 / 3);
-    }
-    let mut bvh: Option<Bvh<f32>> = None;
-    let close2 = error * error;
-    let mut out = vec![Vec::new(); children.len()];
-    let mut bits = vec![0u8; children.len()];
-    let mut hint = usize::MAX;
-    for (i, &(code, t, mask)) in owned.iter().enumerate() {
-        let (mut touched, mut count) = ([0usize; 7], 0);
-        for b in set_bits(mask) {
-            let f = found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
-            // Looked up only for an unmeasured corner (most samples were measured).
-            let kept = || if b < 3 { at_corner.get(&id(t[b])) } else { None };
-            let nearest = match f {
-                NOT_FOUND if let Some(&k) = kept() => k as usize,
-                NOT_FOUND => {
-                    // Not measured and not a kept corner: the output triangle nearest to it.
-                    let bvh = bvh.get_or_insert_with(|| Bvh::new(&tris));
-                    bvh.nearest_squared(&tris, sample_point(&t.map(point), b), close2 / 16.0, hint).1
-                }
-                _ => f as usize,
-            };
-            hint = nearest;
-            let c = output_child[nearest] as usize;
-            if bits[c] == 0 {
-                touched[count] = c;
-                count += 1;
-            }
-            bits[c] |= 1 << b;
-        }
-        for &c in &touched[..count] {
-            out[c].push((code, t, std::mem::take(&mut bits[c])));
-        }
-    }
-    out
 }
 
 /// A group's stored error (object space) when all its members have error `members_error`: see
@@ -267,33 +147,17 @@ pub fn group_error(
     simplifier_error: f32,
 ) -> f32 {
     let errors = vec![members_error; input.len() / 3];
-    let sides = Sides { input, triangle_errors: &errors, owned: None, small: 0.0 };
+    let sides = Sides { input, triangle_errors: &errors, owned: None };
     let (total, _, _) = measure(mesh, &sides, output, part_size, simplifier_error as f64, None, None);
     stored(total, simplifier_error).max(members_error)
 }
 
 /// The reference side of a measurement: triangles (welded ids), each one's member error, and
-/// optionally which of each one's samples to measure.
+/// optionally the level-0 samples they come from (see [`Reference::owned`]).
 struct Sides<'a> {
     input: &'a [u32],
     triangle_errors: &'a [f32],
-    owned: Option<&'a [u8]>,
-    /// With `owned`: a triangle whose corners are all within this of its centroid is measured
-    /// at its centroid only, with that radius added: every point of it is within the radius of
-    /// the centroid, and distance to a surface changes by at most the distance moved (so the
-    /// bound holds for all its points, not just samples). Upper levels, whose errors dwarf the
-    /// level-0 triangles, then measure one point per triangle.
-    small: f64,
-}
-
-/// The centroid's bit among a triangle's samples (see [`Owned`]).
-const CENTROID: u8 = 1 << 6;
-
-/// Largest distance from a triangle's centroid to its corners (so to any of its points).
-fn radius(t: &Triangle<f32>) -> f32 {
-    let c = sample_point(t, 6);
-    t.iter().map(|p| (0..3).map(|k| (p[k] - c[k]) * (p[k] - c[k])).sum::<f32>().sqrt()).fold(0.0, f32::max)
-        * (1.0 + 1e-5)
+    owned: Option<&'a [Owned]>,
 }
 
 /// The whole level-0 surface of a welded mesh, in object coordinates, for measuring output
@@ -367,12 +231,15 @@ fn measure(
     // returned error of it (see `assign_owned`); NOT_FOUND where the sample was not measured.
     let mut found = vec![NOT_FOUND; input.len() / 3 * 7];
     let id = |v: u32| mesh.position_ids[v as usize];
+    let balls = || {
+        sides.owned.into_iter().flatten().filter_map(|o| if let Samples::Ball(b) = o.samples { Some(b) } else { None })
+    };
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-    for &v in input {
-        let p = mesh.positions[v as usize];
+    let corners = input.iter().map(|&v| (mesh.positions[v as usize], 0.0));
+    for (p, r) in corners.chain(balls().map(|b| (b.center, b.radius))) {
         for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
+            lo[k] = lo[k].min(p[k] - r);
+            hi[k] = hi[k].max(p[k] + r);
         }
     }
     let center = [0, 1, 2].map(|k| lo[k] * 0.5 + hi[k] * 0.5);
@@ -387,17 +254,19 @@ fn measure(
     let triangles = |indices: &[u32]| -> Vec<Triangle<f32>> {
         indices.par_chunks_exact(3).map(|t| [local(t[0]), local(t[1]), local(t[2])]).collect()
     };
-    let (input_tris, output_tris) = (triangles(input), triangles(output));
+    let (mut input_tris, output_tris) = (triangles(input), triangles(output));
     let (mut input_duty, output_duty) = duties(mesh, input, output, triangle_errors, sides.owned.is_some());
-    // Per input triangle, a distance added to its samples' (see `Sides::small`).
+    // Per input entry, a distance added to its samples': a ball's radius (measured at its
+    // centre, see `crate::samples`).
     let mut reach_of = vec![0.0f32; input_tris.len()];
     if let Some(owned) = sides.owned {
-        let duty_reach = input_duty.par_iter_mut().zip(&mut reach_of);
-        duty_reach.zip(owned).zip(&input_tris).for_each(|(((d, r), o), tri)| {
-            *d &= o;
-            let radius = radius(tri);
-            if *d != 0 && (radius as f64) <= sides.small {
-                (*d, *r) = (CENTROID, radius);
+        let entries = input_duty.par_iter_mut().zip(&mut reach_of).zip(&mut input_tris);
+        entries.zip(owned).for_each(|(((d, r), tri), o)| {
+            *d &= o.bits();
+            if let Samples::Ball(b) = o.samples {
+                let c = b.center;
+                *tri = [[c[0] - center[0], c[1] - center[1], c[2] - center[2]]; 3];
+                *r = b.radius;
             }
         });
     }
@@ -454,7 +323,8 @@ fn measure(
     if sides.owned.is_some() {
         let output = (&output_bvh, &output_tris[..]);
         let bound = |e: f32| limits.enough2(worst, e as f64).sqrt();
-        accept_patches(&input_tris, (&mut input_duty, &mut found), output, triangle_errors, bound);
+        let input = (&input_tris[..], &reach_of[..]);
+        accept_patches(input, (&mut input_duty, &mut found), output, triangle_errors, bound);
     }
     let side =
         InputSide { mesh, input, tris: &input_tris, duty: &input_duty, errors: triangle_errors, reach: &reach_of };
@@ -521,7 +391,7 @@ struct InputSide<'a> {
     tris: &'a [Triangle<f32>],
     duty: &'a [u8],
     errors: &'a [f32],
-    /// Per triangle, the radius added where it is measured at its centroid only.
+    /// Per entry, the radius added where it is a ball, measured at its centre.
     reach: &'a [f32],
 }
 
@@ -555,7 +425,7 @@ impl InputSide<'_> {
                     let (d2, nearest) = bvh.nearest_squared(output, sample_point(tri, b), enough, hint);
                     hint = nearest;
                     if self.reach[i] > 0.0 {
-                        // Measured at the centroid for the whole triangle.
+                        // A ball, measured at its centre.
                         slots.fill(nearest as u32);
                     } else {
                         slots[b] = nearest as u32;
@@ -574,7 +444,8 @@ impl InputSide<'_> {
     }
 }
 
-/// Input → output, a patch at a time: where a sphere around several input triangles lies so
+/// Input → output, a patch at a time: where a sphere around several input entries (level-0
+/// triangles, or balls grown by their `reach`: see [`crate::samples`]) lies so
 /// close to the output that no point in it can raise the error, one query at its centre
 /// settles all of their samples. Distance to a surface is 1-Lipschitz, so every point within
 /// `R` of the centre is within `d + R` of the output; a patch is settled when `d + R` is below
@@ -587,7 +458,7 @@ impl InputSide<'_> {
 /// measured sample by sample. At upper levels, whose errors dwarf the level-0 triangles, this
 /// replaces most of the three queries per level-0 triangle by one per patch.
 fn accept_patches(
-    input: &[Triangle<f32>],
+    (input, reach): (&[Triangle<f32>], &[f32]),
     (duty, found): (&mut [u8], &mut [u32]),
     (bvh, output): (&Bvh<f32>, &[Triangle<f32>]),
     triangle_errors: &[f32],
@@ -596,7 +467,7 @@ fn accept_patches(
     if input.is_empty() {
         return;
     }
-    let boxes = BoxPyramid::new(input, duty, triangle_errors);
+    let boxes = BoxPyramid::new((input, reach), duty, triangle_errors);
     let mut hint = usize::MAX;
     let mut stack = vec![(boxes.levels.len() - 1, 0)];
     while let Some((level, k)) = stack.pop() {
@@ -635,23 +506,23 @@ struct BoxPyramid {
 }
 
 impl BoxPyramid {
-    /// The pyramid over `triangles` with their `errors`; those whose `duty` is 0 have nothing
-    /// to measure and get an empty box.
-    fn new(triangles: &[Triangle<f32>], duty: &[u8], errors: &[f32]) -> BoxPyramid {
+    /// The pyramid over `triangles` grown by their `reach` (see `InputSide::reach`), with their
+    /// `errors`; those whose `duty` is 0 have nothing to measure and get an empty box.
+    fn new((triangles, reach): (&[Triangle<f32>], &[f32]), duty: &[u8], errors: &[f32]) -> BoxPyramid {
         // Comparisons rather than `min`/`max` (their NaN rules cost instructions on every
         // triangle): on finite values the same bounds, up to the sign of a zero, which neither
         // a centre's query nor a radius sees.
         let (lesser, greater) =
             (|a: f32, b: f32| if b < a { b } else { a }, |a: f32, b: f32| if b > a { b } else { a });
-        let one = |(t, &d): (&Triangle<f32>, &u8)| {
+        let one = |((t, &d), &r): ((&Triangle<f32>, &u8), &f32)| {
             if d == 0 {
                 return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
             }
-            let lo = [0, 1, 2].map(|k| lesser(lesser(t[0][k], t[1][k]), t[2][k]));
-            let hi = [0, 1, 2].map(|k| greater(greater(t[0][k], t[1][k]), t[2][k]));
+            let lo = [0, 1, 2].map(|k| lesser(lesser(t[0][k], t[1][k]), t[2][k]) - r);
+            let hi = [0, 1, 2].map(|k| greater(greater(t[0][k], t[1][k]), t[2][k]) + r);
             (lo, hi)
         };
-        let mut levels = vec![triangles.iter().zip(duty).map(one).collect::<Vec<_>>()];
+        let mut levels = vec![triangles.iter().zip(duty).zip(reach).map(one).collect::<Vec<_>>()];
         while levels[levels.len() - 1].len() > 1 {
             let union = |p: &[([f32; 3], [f32; 3])]| {
                 let (mut lo, mut hi) = p[0];
@@ -686,9 +557,6 @@ impl BoxPyramid {
         Some((c, r2.sqrt() * (1.0 + 1e-5)))
     }
 }
-
-/// `measure`'s mark for a sample it did not measure.
-const NOT_FOUND: u32 = u32::MAX;
 
 /// Which samples each triangle of `input` and of `output` measures, as bits: corner k (bit k;
 /// input only: the corners the output dropped), the midpoint of edge k from corner k (bit 3 + k)

@@ -8,11 +8,12 @@
 use crate::chords::{self, Chords};
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopCluster, LOCAL};
-use crate::deviation::{assign_owned, merge_owned, part_sizes, simplify_measured, Original, Owned, Reference};
+use crate::deviation::{part_sizes, simplify_measured, Original, Reference};
 use crate::error::BakeError;
 use crate::open;
 use crate::partition::{cluster_graph, partition};
 use crate::progress::Progress;
+use crate::samples::{assign_owned, merge_owned, sort_owned, Owned};
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Locks, Method};
 use crate::weld::WeldedMesh;
@@ -70,9 +71,10 @@ pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64]) -
         .map(|((indices, open), (samples, codes))| {
             let own_sphere = bounding_sphere(&indices, &mesh.positions);
             let owned = indices.chunks_exact(3).zip(samples).zip(codes);
-            let mut owned: Vec<Owned> = owned.map(|((t, bits), code)| (code, [t[0], t[1], t[2]], bits)).collect();
+            let mut owned: Vec<Owned> =
+                owned.map(|((t, bits), code)| Owned::triangle(code, [t[0], t[1], t[2]], bits)).collect();
             // Sorted, as every later cluster's is, so that `merge_owned` merges sorted runs.
-            owned.sort_unstable();
+            sort_owned(&mut owned);
             BuiltCluster { indices, own_group: NO_GROUP, own_sphere, own_error: 0.0, group: NO_GROUP, open, owned }
         })
         .collect()
@@ -87,7 +89,7 @@ fn triangle_codes(mesh: &WeldedMesh, clusters: &[Vec<u32>]) -> Vec<Vec<u32>> {
     clusters.iter().map(|c| codes.by_ref().take(c.len() / 3).collect()).collect()
 }
 
-/// Per triangle of `clusters`, the level-0 samples it owns (see `deviation::Owned`): its
+/// Per triangle of `clusters`, the level-0 samples it owns (see `samples::Samples`): its
 /// centroid, and each corner and edge midpoint on the first triangle that uses that position or
 /// edge, so that a shared point is measured once per level.
 fn first_samples(mesh: &WeldedMesh, clusters: &[Vec<u32>]) -> Vec<Vec<u8>> {
@@ -278,7 +280,7 @@ impl<'a> Builder<'a> {
         let owned = if owned.is_empty() {
             vec![Vec::new(); indices.len()]
         } else {
-            assign_owned(mesh, &owned, (&s.indices, &found), &indices, error)
+            assign_owned(mesh, &owned, (&s.indices, &found), &indices, (error, part_size))
         };
         let children = indices
             .into_iter()
@@ -296,7 +298,7 @@ impl<'a> Builder<'a> {
         &'r self,
         part: &[u32],
         merged: &'r [u32],
-        owned: &[Owned],
+        owned: &'r [Owned],
         members_error: f32,
         lenient: bool,
     ) -> Reference<'r> {
@@ -304,12 +306,12 @@ impl<'a> Builder<'a> {
             let members = part.iter().map(|&c| &self.clusters[self.pending[c as usize]]);
             let errors = members.flat_map(|m| std::iter::repeat_n(m.own_error, m.indices.len() / 3)).collect();
             let triangles = Cow::Borrowed(merged);
-            Reference { triangles, errors, samples: None, members_error, original: None, lenient }
+            Reference { triangles, errors, owned: None, members_error, original: None, lenient }
         } else {
             let errors = vec![0.0; owned.len()];
-            let samples = Some(owned.iter().map(|o| o.2).collect());
-            let triangles = Cow::Owned(owned.iter().flat_map(|o| o.1).collect());
-            Reference { triangles, errors, samples, members_error, original: self.original.as_ref(), lenient }
+            let triangles = Cow::Owned(owned.iter().flat_map(|o| o.corners()).collect());
+            let original = self.original.as_ref();
+            Reference { triangles, errors, owned: Some(owned), members_error, original, lenient }
         }
     }
 

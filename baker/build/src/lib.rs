@@ -14,6 +14,7 @@ pub mod levels;
 pub mod open;
 pub mod partition;
 pub mod progress;
+pub mod samples;
 pub mod settings;
 pub mod shard;
 pub mod simplify;
