@@ -14,7 +14,7 @@
 //! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
 //! with their worst spots locked ([`simplify_measured`]).
 
-use crate::samples::{sample_point, set_bits, Owned, Samples, NOT_FOUND};
+use crate::samples::{sample_point, set_bits, Owned, Samples, CENTROID, NOT_FOUND};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Locks, Simplified};
 use crate::weld::WeldedMesh;
@@ -33,6 +33,11 @@ pub const SAMPLING_MARGIN: f64 = 1.0;
 /// the result with the smaller error is kept. Such groups (a few dozen of the dragon's 887)
 /// would otherwise pass their error on to every ancestor. Measured: see docs/BENCHMARKS.md.
 pub const OUTLIER_RATIO: f64 = 4.0;
+
+/// A level-0 triangle whose radius is at most this fraction of the members' error is measured
+/// at its centroid plus its radius (see `Sides::small`): it loosens the bound by at most about
+/// this fraction, and measures one point instead of about three.
+const SMALL_TRIANGLE: f64 = 0.05;
 
 /// Re-simplifications of one outlier group at most; each locks more.
 const OUTLIER_RETRIES: usize = 3;
@@ -87,7 +92,8 @@ pub fn simplify_measured(
     part_size: &[f32],
 ) -> Option<Measured> {
     let (members, triangles, errors) = (reference.members_error, &reference.triangles[..], &reference.errors);
-    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.owned };
+    let small = SMALL_TRIANGLE * members as f64;
+    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.owned, small };
     let error_of = |s: &Simplified, hot_above: Option<f64>| {
         let (total, hot, found) =
             measure(mesh, &sides, &s.indices, part_size, s.error as f64, hot_above, reference.original);
@@ -147,7 +153,7 @@ pub fn group_error(
     simplifier_error: f32,
 ) -> f32 {
     let errors = vec![members_error; input.len() / 3];
-    let sides = Sides { input, triangle_errors: &errors, owned: None };
+    let sides = Sides { input, triangle_errors: &errors, owned: None, small: 0.0 };
     let (total, _, _) = measure(mesh, &sides, output, part_size, simplifier_error as f64, None, None);
     stored(total, simplifier_error).max(members_error)
 }
@@ -158,6 +164,18 @@ struct Sides<'a> {
     input: &'a [u32],
     triangle_errors: &'a [f32],
     owned: Option<&'a [Owned]>,
+    /// With `owned`: a triangle whose corners are all within this of its centroid is measured
+    /// at its centroid only, with that radius added, like a ball (see [`crate::samples`]).
+    /// Upper levels, whose errors dwarf the level-0 triangles, then measure one point per
+    /// triangle where its samples are not gathered into balls.
+    small: f64,
+}
+
+/// Largest distance from a triangle's centroid to its corners (so to any of its points).
+fn radius(t: &Triangle<f32>) -> f32 {
+    let c = sample_point(t, 6);
+    t.iter().map(|p| (0..3).map(|k| (p[k] - c[k]) * (p[k] - c[k])).sum::<f32>().sqrt()).fold(0.0, f32::max)
+        * (1.0 + 1e-5)
 }
 
 /// The whole level-0 surface of a welded mesh, in object coordinates, for measuring output
@@ -267,6 +285,11 @@ fn measure(
                 let c = b.center;
                 *tri = [[c[0] - center[0], c[1] - center[1], c[2] - center[2]]; 3];
                 *r = b.radius;
+            } else if *d != 0 {
+                let radius = radius(tri);
+                if (radius as f64) <= sides.small {
+                    (*d, *r) = (CENTROID, radius);
+                }
             }
         });
     }
@@ -679,14 +702,6 @@ mod tests {
         let c = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]].map(at);
         let output = vec![c[0], c[1], c[2], c[0], c[2], c[3]];
         (w, input, output)
-    }
-
-    #[test]
-    fn set_bits_lists_the_low_seven_bits_ascending() {
-        for mask in 0..=255u8 {
-            let expected: Vec<usize> = (0..7).filter(|b| mask >> b & 1 != 0).collect();
-            assert_eq!(set_bits(mask).collect::<Vec<_>>(), expected, "{mask:#b}");
-        }
     }
 
     #[test]

@@ -6,21 +6,28 @@
 //!
 //! Balls keep the upper levels cheap. Every level's groups together own every level-0
 //! triangle, so without them each level would measure, sort and hand down the whole input
-//! again (the top groups of the Stanford dragon: 866 K triangles each). Once a run of samples
-//! fits in a sphere of radius at most [`BALL_FRACTION`] × the error, it is measured at the
-//! sphere's centre with the radius added (distance to a surface changes by at most the distance
-//! moved, so the bound holds for every point of its triangles, not just the samples), at a
-//! cost of at most that fraction of the error.
+//! again (the top groups of the Stanford dragon: 866 K triangles each, one group per level, so
+//! on one core). Where a cluster holds many more samples than triangles ([`GATHER_RATIO`]), a
+//! run of them that fits in a sphere of radius at most [`BALL_FRACTION`] × the error becomes
+//! one entry, measured at the sphere's centre with the radius added (distance to a surface
+//! changes by at most the distance moved, so the bound holds for every point of its triangles,
+//! not just the samples), at a cost of at most that fraction of the error.
 
 use crate::weld::WeldedMesh;
 use mres_geom::bvh::{Bvh, Triangle};
-use std::cmp::Ordering;
 
 /// A run of samples handed down becomes a ball when its enclosing sphere's radius is at most
 /// this fraction of the error of the group it was handed down by (the next group's members'
 /// error is at least that). It loosens a stored error by at most about this fraction.
 /// Measured: see docs/BENCHMARKS.md (bake time).
 pub const BALL_FRACTION: f64 = 0.2;
+
+/// A cluster's samples are gathered into balls only where they are at least this many times
+/// its triangles: at the upper levels, where every level would otherwise measure, sort and hand
+/// down the whole input again. Below, where a ball would hold a few triangles, the patches of
+/// the measure (one query per settled run) do the same work for less, and gathering would cost
+/// more than it saves. Measured: see docs/BENCHMARKS.md (bake time).
+pub const GATHER_RATIO: usize = 32;
 
 /// The centroid's bit among a triangle's samples (see [`Samples::Triangle`]).
 pub const CENTROID: u8 = 1 << 6;
@@ -85,28 +92,17 @@ impl Owned {
         }
     }
 
-    /// A total order: by code, triangles (by ids, then bits) before balls (by their bits).
-    fn order(&self, other: &Owned) -> Ordering {
-        let rest = match (self.samples, other.samples) {
-            (Samples::Triangle(a, x), Samples::Triangle(b, y)) => (a, x).cmp(&(b, y)),
-            (Samples::Triangle(..), Samples::Ball(_)) => Ordering::Less,
-            (Samples::Ball(_), Samples::Triangle(..)) => Ordering::Greater,
-            (Samples::Ball(a), Samples::Ball(b)) => a.key().cmp(&b.key()),
-        };
-        self.code.cmp(&other.code).then(rest)
-    }
-}
-
-impl Ball {
-    /// The ball's values as integers, for [`Owned::order`].
-    fn key(&self) -> ([u32; 3], u32, u32) {
-        (self.center.map(f32::to_bits), self.radius.to_bits(), self.at)
+    /// The sort key: code, corners, bits. A ball's corners are its `at` three times, which no
+    /// triangle has (degenerate triangles are dropped on import), so a ball never compares
+    /// equal to a triangle; two balls with equal keys keep their order (stable sorts only).
+    fn key(&self) -> (u32, [u32; 3], u8) {
+        (self.code, self.corners(), self.bits())
     }
 }
 
 /// Sorts a cluster's samples (see [`Owned`]).
 pub fn sort_owned(owned: &mut [Owned]) {
-    owned.sort_unstable_by(Owned::order);
+    owned.sort_by_key(Owned::key);
 }
 
 /// The level-0 samples of a group's members, sorted (so in Morton order), one entry per
@@ -115,7 +111,7 @@ pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
     let mut all: Vec<Owned> = owned.collect();
     // Each member's list is sorted (see `assign_owned`, and level 0's): the stable sort merges
     // such runs instead of sorting from scratch, and on a total order it gives the same result.
-    all.sort_by(Owned::order);
+    all.sort_by_key(Owned::key);
     // In place: a triangle's entries are adjacent, the first one kept gets the bits of all.
     all.dedup_by(|next, kept| match (next.samples, &mut kept.samples) {
         (Samples::Triangle(t, bits), Samples::Triangle(k, kept_bits)) if t == *k => {
@@ -217,7 +213,14 @@ pub fn assign_owned(
         }
     }
     let limit = BALL_FRACTION * error as f64;
-    out.into_iter().map(|list| gather(mesh, list, limit, part_size)).collect()
+    let gathered = |(list, c): (Vec<Owned>, &Vec<u32>)| {
+        if list.len() >= GATHER_RATIO * c.len() / 3 {
+            gather(mesh, list, limit, part_size)
+        } else {
+            list
+        }
+    };
+    out.into_iter().zip(children).map(gathered).collect()
 }
 
 /// Per triangle of `output`, the index of the child cluster (of `children`, its split) that
@@ -398,7 +401,7 @@ mod tests {
         assert_eq!(gather(&mesh, owned.clone(), 0.3, &sizes), owned);
         let balls = gather(&mesh, owned.clone(), 1.5, &sizes);
         assert!(balls.len() * 2 < owned.len(), "{} entries from {}", balls.len(), owned.len());
-        assert!(balls.windows(2).all(|w| w[0].order(&w[1]) != Ordering::Greater));
+        assert!(balls.windows(2).all(|w| w[0].key() <= w[1].key()));
         covered(&mesh, &owned, &balls);
         for o in &balls {
             if let Samples::Ball(b) = o.samples {
