@@ -705,6 +705,24 @@ mod tests {
     }
 
     #[test]
+    fn a_ball_bounds_every_point_of_its_triangles() {
+        let (w, input, output) = tent(0.25);
+        let sizes = part_sizes(&w);
+        let h = w.positions.iter().map(|p| p[2]).fold(0.0f32, f32::max) as f64;
+        let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
+        let balls = crate::samples::gather(&w, owned, 10.0, &sizes);
+        let [Owned { samples: Samples::Ball(ball), .. }] = &balls[..] else { panic!("one ball: {balls:?}") };
+        let corners: Vec<u32> = balls.iter().flat_map(|o| o.corners()).collect();
+        let errors = vec![0.0; balls.len()];
+        let sides = Sides { input: &corners, triangle_errors: &errors, owned: Some(&balls), small: 0.0 };
+        let original = Original::new(&w);
+        // The peak is `h` above the flat output; the ball is measured at its centre only.
+        let (worst, _, found) = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original));
+        assert!(worst >= h && worst <= h + 2.0 * ball.radius as f64, "{worst} vs peak {h}, {ball:?}");
+        assert_ne!(found[6], NOT_FOUND, "the centre's query names an output triangle");
+    }
+
+    #[test]
     fn measured_error_bounds_the_dropped_peak_and_adds_the_members() {
         let (w, input, output) = tent(0.25);
         let sizes = part_sizes(&w);

@@ -151,7 +151,7 @@ pub fn sample_point(t: &Triangle<f32>, b: usize) -> [f32; 3] {
 /// sample must go to a cluster near itself, not just near its triangle: where a group border
 /// later runs between two clusters, a level-0 triangle can straddle it, and its far corner would
 /// be measured across the border. Every sample stays under exactly one pending cluster. Each
-/// cluster's samples are then gathered into balls (see [`gather`]).
+/// cluster's samples are then gathered into balls (see `gather`).
 pub fn assign_owned(
     mesh: &WeldedMesh,
     owned: &[Owned],
@@ -247,7 +247,7 @@ type Sphere = ([f64; 3], f64);
 /// radius of at most `limit` into balls, keeping the order: a run's ball takes its first entry's
 /// code. A triangle alone that fits becomes a ball too (one query instead of up to seven); one
 /// that does not fit stays as it is.
-fn gather(mesh: &WeldedMesh, list: Vec<Owned>, limit: f64, part_size: &[f32]) -> Vec<Owned> {
+pub(crate) fn gather(mesh: &WeldedMesh, list: Vec<Owned>, limit: f64, part_size: &[f32]) -> Vec<Owned> {
     if limit <= 0.0 {
         return list;
     }
