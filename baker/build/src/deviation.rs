@@ -249,9 +249,7 @@ fn measure(
     // returned error of it (see `assign_owned`); NOT_FOUND where the sample was not measured.
     let mut found = vec![NOT_FOUND; input.len() / 3 * 7];
     let id = |v: u32| mesh.position_ids[v as usize];
-    let balls = || {
-        sides.owned.into_iter().flatten().filter_map(|o| if let Samples::Ball(b) = o.samples { Some(b) } else { None })
-    };
+    let balls = || sides.owned.into_iter().flatten().filter_map(Owned::ball);
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     let corners = input.iter().map(|&v| (mesh.positions[v as usize], 0.0));
     for (p, r) in corners.chain(balls().map(|b| (b.center, b.radius))) {
@@ -264,26 +262,31 @@ fn measure(
     let reach = (0..3).map(|k| (hi[k] - center[k]).max(center[k] - lo[k])).fold(0.0f32, f32::max);
     // Rounding of the f32 subtraction, products and sums (a few dozen ulps of the group's reach).
     let slack = 64.0 * f32::EPSILON as f64 * reach as f64;
-    let local = |v: u32| {
-        let p = mesh.positions[v as usize];
-        [p[0] - center[0], p[1] - center[1], p[2] - center[2]]
-    };
+    let to_local = |p: [f32; 3]| [p[0] - center[0], p[1] - center[1], p[2] - center[2]];
+    let local = |v: u32| to_local(mesh.positions[v as usize]);
     // In parallel: at the top levels the input is every level-0 triangle, in one group.
     let triangles = |indices: &[u32]| -> Vec<Triangle<f32>> {
         indices.par_chunks_exact(3).map(|t| [local(t[0]), local(t[1]), local(t[2])]).collect()
     };
-    let (mut input_tris, output_tris) = (triangles(input), triangles(output));
+    // A ball's entry is its centre three times (measured at its centroid, the centre).
+    let entry = |o: &Owned| match o.samples {
+        Samples::Ball(b) => [to_local(b.center); 3],
+        Samples::Triangle(t, _) => t.map(local),
+    };
+    let input_tris = match sides.owned {
+        Some(owned) => owned.par_iter().map(entry).collect(),
+        None => triangles(input),
+    };
+    let output_tris = triangles(output);
     let (mut input_duty, output_duty) = duties(mesh, input, output, triangle_errors, sides.owned.is_some());
     // Per input entry, a distance added to its samples': a ball's radius (measured at its
     // centre, see `crate::samples`).
     let mut reach_of = vec![0.0f32; input_tris.len()];
     if let Some(owned) = sides.owned {
-        let entries = input_duty.par_iter_mut().zip(&mut reach_of).zip(&mut input_tris);
+        let entries = input_duty.par_iter_mut().zip(&mut reach_of).zip(&input_tris);
         entries.zip(owned).for_each(|(((d, r), tri), o)| {
             *d &= o.bits();
-            if let Samples::Ball(b) = o.samples {
-                let c = b.center;
-                *tri = [[c[0] - center[0], c[1] - center[1], c[2] - center[2]]; 3];
+            if let Some(b) = o.ball() {
                 *r = b.radius;
             } else if *d != 0 {
                 let radius = radius(tri);

@@ -84,6 +84,14 @@ impl Owned {
         }
     }
 
+    /// The ball, if it is one.
+    pub fn ball(&self) -> Option<Ball> {
+        match self.samples {
+            Samples::Ball(b) => Some(b),
+            Samples::Triangle(..) => None,
+        }
+    }
+
     /// The sample bits to measure: a ball is measured at its centre only.
     pub fn bits(&self) -> u8 {
         match self.samples {
@@ -102,7 +110,7 @@ impl Owned {
 
 /// Sorts a cluster's samples (see [`Owned`]).
 pub fn sort_owned(owned: &mut [Owned]) {
-    owned.sort_by_key(Owned::key);
+    owned.sort_unstable_by_key(Owned::key);
 }
 
 /// The level-0 samples of a group's members, sorted (so in Morton order), one entry per
@@ -288,7 +296,7 @@ fn finish(first: Owned, count: usize, (center, radius): Sphere, at: u32, limit: 
     let r = radius + moved;
     let mut radius = r as f32;
     if (radius as f64) < r {
-        radius = f32::from_bits(radius.to_bits() + 1);
+        radius = radius.next_up();
     }
     Owned { code: first.code, samples: Samples::Ball(Ball { center: rounded, radius, at }) }
 }
