@@ -2,10 +2,14 @@
 //! point-triangle distance. Used by the validator's honesty measure (`honesty`) and by the
 //! baker's per-group deviation (`deviation`), so that both measure distance the same way.
 
+use rayon::prelude::*;
+
 /// The coordinate type of a [`Bvh`]: `f64` for the validator, `f32` for the baker's per-group
 /// measure (half the memory, and its error is far below the position grid's step).
 pub trait Real:
     Copy
+    + Send
+    + Sync
     + PartialOrd
     + std::ops::Add<Output = Self>
     + std::ops::Sub<Output = Self>
@@ -65,6 +69,7 @@ pub struct Bvh<T = f64> {
     parent: Vec<u32>,
 }
 
+#[derive(Clone, Copy)]
 struct Node<T> {
     lo: [T; 3],
     hi: [T; 3],
@@ -74,63 +79,28 @@ struct Node<T> {
 }
 
 impl<T: Real> Bvh<T> {
-    /// Builds the hierarchy over `tris` (which later queries must pass again).
+    /// Builds the hierarchy over `tris` (which later queries must pass again). Subtrees of
+    /// more than [`PARALLEL_BUILD`] triangles build side by side; each subtree's nodes have a
+    /// fixed place (its size alone decides how many it has), so the result is the same for any
+    /// thread count.
     pub fn new(tris: &[Triangle<T>]) -> Bvh<T> {
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
-        let mut leaf_of = vec![0u32; tris.len()];
         // Each triangle's box and centroid sum, once: every level of the build reads them.
-        let boxes: Vec<([T; 3], [T; 3])> = tris.iter().map(triangle_box).collect();
-        let centroids: Vec<[T; 3]> = tris.iter().map(|v| [0, 1, 2].map(|k| v[0][k] + v[1][k] + v[2][k])).collect();
+        let boxes: Vec<([T; 3], [T; 3])> = tris.par_iter().with_min_len(4096).map(triangle_box).collect();
+        let centroids: Vec<[T; 3]> =
+            tris.par_iter().with_min_len(4096).map(|v| [0, 1, 2].map(|k| v[0][k] + v[1][k] + v[2][k])).collect();
+        let counts = NodeCounts::new(tris.len());
         let empty = Node { lo: [T::ZERO; 3], hi: [T::ZERO; 3], start: 0, count: 0 };
-        let mut nodes = vec![empty];
-        let mut parent = vec![0u32];
-        let mut stack = vec![(0usize, 0usize, tris.len())];
-        while let Some((node, start, end)) = stack.pop() {
-            let (mut lo, mut hi) = ([T::INFINITY; 3], [T::NEG_INFINITY; 3]);
-            for &t in &order[start..end] {
-                let (tlo, thi) = &boxes[t as usize];
-                // Comparisons rather than `min`/`max` (NaN rules cost instructions); on finite
-                // values the bounds are the same, up to the sign of a zero, which no distance
-                // or extent computed from them sees.
-                for k in 0..3 {
-                    if tlo[k] < lo[k] {
-                        lo[k] = tlo[k];
-                    }
-                    if thi[k] > hi[k] {
-                        hi[k] = thi[k];
-                    }
-                }
+        let total = counts.of(tris.len()) as usize;
+        let (mut nodes, mut parent) = (vec![empty; total], vec![0u32; total]);
+        let (root, rest) = nodes.split_at_mut(1);
+        let build = Build { boxes: &boxes, centroids: &centroids, counts: &counts };
+        build.subtree(0, (&mut order, 0), &mut root[0], (rest, &mut parent[1..], 1));
+        let mut leaf_of = vec![0u32; tris.len()];
+        for (index, n) in nodes.iter().enumerate().filter(|(_, n)| n.count > 0) {
+            for &t in &order[n.start as usize..(n.start + n.count) as usize] {
+                leaf_of[t as usize] = index as u32;
             }
-            nodes[node].lo = lo;
-            nodes[node].hi = hi;
-            if end - start <= 4 {
-                nodes[node].start = start as u32;
-                nodes[node].count = (end - start) as u32;
-                for &t in &order[start..end] {
-                    leaf_of[t as usize] = node as u32;
-                }
-                continue;
-            }
-            let extent = |a: usize| hi[a] - lo[a];
-            let axis = if extent(0) >= extent(1) && extent(0) >= extent(2) {
-                0
-            } else if extent(1) >= extent(2) {
-                1
-            } else {
-                2
-            };
-            let centroid = |t: u32| centroids[t as usize][axis];
-            let mid = (start + end) / 2;
-            order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
-                centroid(a).partial_cmp(&centroid(b)).unwrap_or(std::cmp::Ordering::Equal)
-            });
-            let child = nodes.len();
-            nodes.push(Node { lo, hi, start: 0, count: 0 });
-            nodes.push(Node { lo, hi, start: 0, count: 0 });
-            parent.extend([node as u32; 2]);
-            nodes[node].start = child as u32;
-            stack.push((child, start, mid));
-            stack.push((child + 1, mid, end));
         }
         Bvh { nodes, order, leaf_of, parent }
     }
@@ -280,6 +250,110 @@ impl<T: Real> Bvh<T> {
     }
 }
 
+/// Subtrees of more triangles than this are built on two threads ([`Bvh::new`]).
+const PARALLEL_BUILD: usize = 16 * 1024;
+
+/// Most triangles of a leaf.
+const LEAF: usize = 4;
+
+/// How many nodes the subtree over `n` triangles has, for each size a subtree of the
+/// hierarchy over `n` can have (the median split gives at most two sizes per depth).
+struct NodeCounts(Vec<(usize, u32)>);
+
+impl NodeCounts {
+    fn new(n: usize) -> NodeCounts {
+        fn count(s: usize, memo: &mut Vec<(usize, u32)>) -> u32 {
+            if let Some(&(_, c)) = memo.iter().find(|m| m.0 == s) {
+                return c;
+            }
+            let c = if s <= LEAF { 1 } else { 1 + count(s / 2, memo) + count(s - s / 2, memo) };
+            memo.push((s, c));
+            c
+        }
+        let mut memo = Vec::new();
+        count(n, &mut memo);
+        NodeCounts(memo)
+    }
+
+    /// The node count of a subtree over `s` triangles.
+    fn of(&self, s: usize) -> u32 {
+        self.0.iter().find(|m| m.0 == s).map_or(1, |m| m.1)
+    }
+}
+
+/// What every subtree of one [`Bvh::new`] reads.
+struct Build<'a, T> {
+    boxes: &'a [([T; 3], [T; 3])],
+    centroids: &'a [[T; 3]],
+    counts: &'a NodeCounts,
+}
+
+impl<T: Real> Build<'_, T> {
+    /// Builds the subtree at node `index` over `order` (its triangles, from `first` in the
+    /// whole order) into `node` and, below it, its descendants into `below` (their nodes and
+    /// parents, numbered from `next`): its two children first (a pair at an odd index), then
+    /// the left child's descendants, then the right child's.
+    fn subtree(
+        &self,
+        index: u32,
+        (order, first): (&mut [u32], usize),
+        node: &mut Node<T>,
+        (below, parents, next): (&mut [Node<T>], &mut [u32], u32),
+    ) {
+        let (mut lo, mut hi) = ([T::INFINITY; 3], [T::NEG_INFINITY; 3]);
+        for &t in order.iter() {
+            let (tlo, thi) = &self.boxes[t as usize];
+            // Comparisons rather than `min`/`max` (NaN rules cost instructions); on finite
+            // values the bounds are the same, up to the sign of a zero, which no distance
+            // or extent computed from them sees.
+            for k in 0..3 {
+                if tlo[k] < lo[k] {
+                    lo[k] = tlo[k];
+                }
+                if thi[k] > hi[k] {
+                    hi[k] = thi[k];
+                }
+            }
+        }
+        (node.lo, node.hi) = (lo, hi);
+        if order.len() <= LEAF {
+            (node.start, node.count) = (first as u32, order.len() as u32);
+            return;
+        }
+        let extent = |a: usize| hi[a] - lo[a];
+        let axis = if extent(0) >= extent(1) && extent(0) >= extent(2) {
+            0
+        } else if extent(1) >= extent(2) {
+            1
+        } else {
+            2
+        };
+        let centroid = |t: u32| self.centroids[t as usize][axis];
+        let (mid, parallel) = (order.len() / 2, order.len() > PARALLEL_BUILD);
+        order.select_nth_unstable_by(mid, |&a, &b| centroid(a).partial_cmp(&centroid(b)).unwrap_or(std::cmp::Ordering::Equal));
+        (node.start, node.count) = (next, 0);
+        let (pair, rest) = below.split_at_mut(2);
+        let (pair_parents, rest_parents) = parents.split_at_mut(2);
+        pair_parents.fill(index);
+        let left_below = self.counts.of(mid) as usize - 1;
+        let (left_rest, right_rest) = rest.split_at_mut(left_below);
+        let (left_parents, right_parents) = rest_parents.split_at_mut(left_below);
+        let (left_order, right_order) = order.split_at_mut(mid);
+        let (left, right) = pair.split_at_mut(1);
+        let after = next + 2;
+        let mut build_left = || self.subtree(next, (left_order, first), &mut left[0], (left_rest, left_parents, after));
+        let right_next = after + left_below as u32;
+        let mut build_right =
+            || self.subtree(next + 1, (right_order, first + mid), &mut right[0], (right_rest, right_parents, right_next));
+        if parallel {
+            rayon::join(build_left, build_right);
+        } else {
+            build_left();
+            build_right();
+        }
+    }
+}
+
 /// No node: a query without a hint skips none.
 const NO_NODE: u32 = u32::MAX;
 
@@ -415,6 +489,37 @@ mod tests {
                     let (d2, t) = query(&bvh, &tris, p, enough2, hint);
                     assert!(d2 <= enough2 && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {enough2}");
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn a_tree_built_on_several_threads_is_whole_and_answers_exactly() {
+        // Enough triangles that the top subtrees build side by side.
+        let tris = scattered(3 * PARALLEL_BUILD + 7);
+        let bvh = Bvh::new(&tris);
+        assert_eq!(bvh.nodes.len(), 2 * bvh.nodes.iter().filter(|n| n.count > 0).count() - 1);
+        // Every inner node's pair of children sits at an odd index and names it as parent;
+        // every triangle is in exactly one leaf, the one `leaf_of` names.
+        let mut seen = vec![0u32; tris.len()];
+        for (i, n) in bvh.nodes.iter().enumerate() {
+            if n.count == 0 {
+                assert!(n.start % 2 == 1, "node {i}: children at {}", n.start);
+                for c in [n.start, n.start + 1] {
+                    assert_eq!(bvh.parent[c as usize], i as u32);
+                }
+            }
+            for &t in &bvh.order[n.start as usize..(n.start + n.count) as usize] {
+                seen[t as usize] += 1;
+                assert_eq!(bvh.leaf_of[t as usize], i as u32);
+            }
+        }
+        assert!(seen.iter().all(|&k| k == 1));
+        for (i, t) in scattered(50).iter().enumerate() {
+            let p = t[2].map(|x| x * 1.1 - 0.05);
+            let exact = tris.iter().map(|t| point_triangle_distance2(p, t)).fold(f32::INFINITY, f32::min);
+            for query in [Bvh::nearest_squared, Bvh::within_squared] {
+                assert_eq!(query(&bvh, &tris, p, 0.0, i * 997).0, exact);
             }
         }
     }
