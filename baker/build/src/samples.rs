@@ -100,17 +100,19 @@ impl Owned {
         }
     }
 
-    /// The sort key: code, corners, bits. A ball's corners are its `at` three times, which no
-    /// triangle has (degenerate triangles are dropped on import), so a ball never compares
-    /// equal to a triangle; two balls with equal keys keep their order (stable sorts only).
-    fn key(&self) -> (u32, [u32; 3], u8) {
-        (self.code, self.corners(), self.bits())
+    /// The sort order: by code, then by corners. A ball's corners are its `at` three times,
+    /// which no triangle has (degenerate triangles are dropped on import), so a ball never
+    /// compares equal to a triangle; two balls that compare equal keep their order (stable
+    /// sorts only), and the entries of one triangle, equal here, are joined whatever their
+    /// order. The corners are compared only on equal codes (rarely: most codes differ).
+    fn order(&self, other: &Owned) -> std::cmp::Ordering {
+        self.code.cmp(&other.code).then_with(|| self.corners().cmp(&other.corners()))
     }
 }
 
 /// Sorts a cluster's samples (see [`Owned`]).
 pub fn sort_owned(owned: &mut [Owned]) {
-    owned.sort_unstable_by_key(Owned::key);
+    owned.sort_unstable_by(Owned::order);
 }
 
 /// The level-0 samples of a group's members, sorted (so in Morton order), one entry per
@@ -119,7 +121,7 @@ pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
     let mut all: Vec<Owned> = owned.collect();
     // Each member's list is sorted (see `assign_owned`, and level 0's): the stable sort merges
     // such runs instead of sorting from scratch, and on a total order it gives the same result.
-    all.sort_by_key(Owned::key);
+    all.sort_by(Owned::order);
     // In place: a triangle's entries are adjacent, the first one kept gets the bits of all.
     all.dedup_by(|next, kept| match (next.samples, &mut kept.samples) {
         (Samples::Triangle(t, bits), Samples::Triangle(k, kept_bits)) if t == *k => {
@@ -409,7 +411,7 @@ mod tests {
         assert_eq!(gather(&mesh, owned.clone(), 0.3, &sizes), owned);
         let balls = gather(&mesh, owned.clone(), 1.5, &sizes);
         assert!(balls.len() * 2 < owned.len(), "{} entries from {}", balls.len(), owned.len());
-        assert!(balls.windows(2).all(|w| w[0].key() <= w[1].key()));
+        assert!(balls.windows(2).all(|w| w[0].order(&w[1]).is_le()));
         covered(&mesh, &owned, &balls);
         for o in &balls {
             if let Samples::Ball(b) = o.samples {

@@ -25,9 +25,17 @@ pub fn edge_keys<T: Copy>(triangles: &[T], position: impl Fn(T) -> u32) -> Vec<u
 /// adjacent; `position` maps an index to its position id.
 pub fn sorted_edge_keys<T: Copy>(triangles: &[T], position: impl Fn(T) -> u32) -> Vec<u64> {
     let mut keys = edge_keys(triangles, position);
-    keys.sort_unstable();
+    // A whole mesh's edges sort on every thread; a group's, on one (groups run side by side).
+    if keys.len() > PARALLEL_SORT {
+        rayon::slice::ParallelSliceMut::par_sort_unstable(&mut keys[..]);
+    } else {
+        keys.sort_unstable();
+    }
     keys
 }
+
+/// Edge lists longer than this are sorted in parallel by [`sorted_edge_keys`].
+const PARALLEL_SORT: usize = 64 * 1024;
 
 #[cfg(test)]
 mod tests {
