@@ -145,11 +145,23 @@ impl<'a> Builder<'a> {
     /// A builder whose pending clusters are `clusters` (triangles into `mesh`); new groups
     /// start at `level`.
     pub fn new(mesh: &'a WeldedMesh, settings: &'a BakeSettings, clusters: Vec<BuiltCluster>, level: u32) -> Self {
+        Self::with_original(mesh, settings, clusters, level, None)
+    }
+
+    /// [`Builder::new`] with the whole level-0 surface already built where the caller has it
+    /// (`Original::new(mesh)`, made while the level-0 clusters were).
+    pub fn with_original(
+        mesh: &'a WeldedMesh,
+        settings: &'a BakeSettings,
+        clusters: Vec<BuiltCluster>,
+        level: u32,
+        original: Option<Original>,
+    ) -> Self {
         let from_level0 = clusters.iter().all(|c| c.own_group == NO_GROUP && !c.owned.is_empty());
         let measured = settings.error_bound == ErrorBound::Measured;
         // Independent passes over the whole mesh, two of them serial: side by side.
         let (original, (always_locked, part_size)) = rayon::join(
-            || (measured && from_level0).then(|| Original::new(mesh)),
+            || (measured && from_level0).then(|| original.unwrap_or_else(|| Original::new(mesh))),
             || rayon::join(|| always_locked(mesh, &clusters), || if measured { part_sizes(mesh) } else { Vec::new() }),
         );
         let pending = (0..clusters.len()).collect();

@@ -2,10 +2,11 @@
 //! bounds, cut into level-0 clusters, and built level by level to the root.
 
 use crate::dag::{BuildStats, BuiltDag, Collected, DagOutput, Frame, StageClock};
+use crate::deviation::Original;
 use crate::error::BakeError;
 use crate::levels::{level0, Builder};
 use crate::progress::Progress;
-use crate::settings::BakeSettings;
+use crate::settings::{BakeSettings, ErrorBound};
 use crate::weld::weld;
 use mres_import::SourceMesh;
 
@@ -27,8 +28,13 @@ pub fn build_whole<O: DagOutput>(
         _ => return Err(BakeError::Empty(source_triangles)),
     };
     clock.lap(&mut stats, "weld");
-    let open = crate::open::odd_edges(&welded, &welded.indices);
-    let mut builder = Builder::new(&welded, settings, level0(&welded, settings, &open), 0);
+    // The whole level-0 surface that errors are measured against, made beside the clusters.
+    let measured = settings.error_bound == ErrorBound::Measured;
+    let (original, clusters) = rayon::join(
+        || measured.then(|| Original::new(&welded)),
+        || level0(&welded, settings, &crate::open::odd_edges(&welded, &welded.indices)),
+    );
+    let mut builder = Builder::with_original(&welded, settings, clusters, 0, original);
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
     builder.build_to_root(progress);

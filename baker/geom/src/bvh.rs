@@ -330,7 +330,9 @@ impl<T: Real> Build<'_, T> {
         };
         let centroid = |t: u32| self.centroids[t as usize][axis];
         let (mid, parallel) = (order.len() / 2, order.len() > PARALLEL_BUILD);
-        order.select_nth_unstable_by(mid, |&a, &b| centroid(a).partial_cmp(&centroid(b)).unwrap_or(std::cmp::Ordering::Equal));
+        order.select_nth_unstable_by(mid, |&a, &b| {
+            centroid(a).partial_cmp(&centroid(b)).unwrap_or(std::cmp::Ordering::Equal)
+        });
         (node.start, node.count) = (next, 0);
         let (pair, rest) = below.split_at_mut(2);
         let (pair_parents, rest_parents) = parents.split_at_mut(2);
@@ -343,8 +345,9 @@ impl<T: Real> Build<'_, T> {
         let after = next + 2;
         let mut build_left = || self.subtree(next, (left_order, first), &mut left[0], (left_rest, left_parents, after));
         let right_next = after + left_below as u32;
-        let mut build_right =
-            || self.subtree(next + 1, (right_order, first + mid), &mut right[0], (right_rest, right_parents, right_next));
+        let mut build_right = || {
+            self.subtree(next + 1, (right_order, first + mid), &mut right[0], (right_rest, right_parents, right_next))
+        };
         if parallel {
             rayon::join(build_left, build_right);
         } else {
