@@ -80,7 +80,7 @@ struct Node<T> {
 
 impl<T: Real> Bvh<T> {
     /// Builds the hierarchy over `tris` (which later queries must pass again). Subtrees of
-    /// more than [`PARALLEL_BUILD`] triangles build side by side; each subtree's nodes have a
+    /// more than `PARALLEL_BUILD` (16 K) triangles build side by side; each subtree's nodes have a
     /// fixed place (its size alone decides how many it has), so the result is the same for any
     /// thread count.
     pub fn new(tris: &[Triangle<T>]) -> Bvh<T> {
