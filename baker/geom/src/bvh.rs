@@ -250,7 +250,7 @@ impl<T: Real> Bvh<T> {
     }
 }
 
-/// Subtrees of more triangles than this are built on two threads ([`Bvh::new`]).
+/// Subtrees of more triangles than this build their two halves side by side ([`Bvh::new`]).
 const PARALLEL_BUILD: usize = 16 * 1024;
 
 /// Most triangles of a leaf.

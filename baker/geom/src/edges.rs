@@ -1,5 +1,7 @@
 //! Edges by position: the key that adjacency, locking and every crack check share.
 
+use rayon::prelude::*;
+
 /// Key of the edge between two positions, independent of direction.
 pub fn edge_key(a: u32, b: u32) -> u64 {
     (a.min(b) as u64) << 32 | a.max(b) as u64
@@ -27,7 +29,7 @@ pub fn sorted_edge_keys<T: Copy>(triangles: &[T], position: impl Fn(T) -> u32) -
     let mut keys = edge_keys(triangles, position);
     // A whole mesh's edges sort on every thread; a group's, on one (groups run side by side).
     if keys.len() > PARALLEL_SORT {
-        rayon::slice::ParallelSliceMut::par_sort_unstable(&mut keys[..]);
+        keys.par_sort_unstable();
     } else {
         keys.sort_unstable();
     }
