@@ -444,8 +444,6 @@ impl InputSide<'_> {
                 let i = first + j;
                 let (t, tri) = (&self.input[3 * i..3 * i + 3], &self.tris[i]);
                 let e = self.errors[i] + self.reach[i];
-                // A point farther than its part's size counts as that: the part vanished.
-                let size = part_size[id(t[0]) as usize];
                 for b in set_bits(self.duty[i] & pass) {
                     let enough = limits.enough2(worst, e as f64);
                     let (d2, nearest) = bvh.nearest_squared(output, sample_point(tri, b), enough, hint);
@@ -456,7 +454,10 @@ impl InputSide<'_> {
                     } else {
                         slots[b] = nearest as u32;
                     }
-                    let d2 = d2.min(size * size);
+                    // A point farther than its part's size counts as that: the part vanished
+                    // (looked up only beyond `enough`, where the capped value can matter).
+                    let size = || part_size[id(t[0]) as usize];
+                    let d2 = if d2 > enough { d2.min(size() * size()) } else { d2 };
                     if d2 > enough {
                         worst = worst.max(limits.total(d2, e as f64));
                         if limits.hot2.is_some_and(|h| d2 > h) {

@@ -432,37 +432,69 @@ pub(crate) fn source_keys<'a>(sources: impl IntoIterator<Item = &'a Quantized>) 
     sources.into_iter().flat_map(|c| (0..c.positions.len()).map(move |v| key(c, v))).collect()
 }
 
-/// A page's source vertices found by key: every (key, source number) pair, sorted, so that
-/// the numbers of equal vertices are one run in ascending order. A sorted array rather than a
-/// hash map of lists: one allocation, and the nearest number is a binary search in the run.
-pub(crate) struct SourceIndex {
-    entries: Vec<(VertexKey, u32)>,
-}
+/// One source page's vertices by key: every (key, number in the page) pair, sorted, so that
+/// the numbers of equal vertices are one run in ascending order. Made once per source page (a
+/// page is the source of several others) rather than once per page that reads it. A sorted
+/// array rather than a hash map of lists: one allocation, and the nearest number is a binary
+/// search in the run.
+pub(crate) struct SortedKeys(Vec<(VertexKey, u32)>);
 
-impl SourceIndex {
-    /// The index of source vertices `keys` (in source numbering).
-    pub(crate) fn new(keys: &[VertexKey]) -> SourceIndex {
+impl SortedKeys {
+    /// The index of one source page's vertex `keys` (in its own numbering).
+    pub(crate) fn new(keys: &[VertexKey]) -> SortedKeys {
         let mut entries: Vec<(VertexKey, u32)> = keys.iter().enumerate().map(|(u, &k)| (k, u as u32)).collect();
         entries.sort_unstable();
-        SourceIndex { entries }
+        SortedKeys(entries)
+    }
+
+    /// The numbers of the vertices equal to `k`, ascending.
+    fn run(&self, k: &VertexKey) -> impl DoubleEndedIterator<Item = u32> + Clone + '_ {
+        let start = self.0.partition_point(|(e, _)| e < k);
+        let run = &self.0[start..];
+        run[..run.partition_point(|(e, _)| e == k)].iter().map(|&(_, u)| u)
+    }
+}
+
+/// A page's source vertices found by key: its source pages' [`SortedKeys`] in order, each
+/// numbered from the sum of the vertex counts before it (the source numbering of FORMAT.md
+/// §4.3).
+pub(crate) struct SourceIndex<'a> {
+    sources: Vec<(&'a SortedKeys, u32)>,
+}
+
+impl<'a> SourceIndex<'a> {
+    /// The index of the source pages `sources`, in order.
+    pub(crate) fn new(sources: impl IntoIterator<Item = &'a SortedKeys>) -> SourceIndex<'a> {
+        let mut first = 0u32;
+        let sources = sources
+            .into_iter()
+            .map(|s| {
+                let at = first;
+                first += s.0.len() as u32;
+                (s, at)
+            })
+            .collect();
+        SourceIndex { sources }
     }
 
     /// The source vertex equal to `k` whose coded difference from `next` (the decoder's
-    /// expectation, the previous far copy's number plus one) is smallest, if any is equal.
+    /// expectation, the previous far copy's number plus one) is smallest, if any is equal; of
+    /// two equally small, the lower number.
     pub(crate) fn nearest(&self, k: &VertexKey, next: i64) -> Option<usize> {
-        let start = self.entries.partition_point(|(e, _)| e < k);
-        let run = &self.entries[start..];
-        let run = &run[..run.partition_point(|(e, _)| e == k)];
-        // The candidates on either side of `next`; zigzag codes −d one smaller than +d.
-        let at = run.partition_point(|&(_, u)| (u as i64) < next);
+        // The equal vertices on either side of `next`, over all sources (numbers ascend with
+        // the source order); zigzag codes −d one smaller than +d.
+        let (mut below, mut above): (Option<u32>, Option<u32>) = (None, None);
+        for &(keys, first) in &self.sources {
+            let mut run = keys.run(k).map(|u| u + first);
+            if above.is_none() {
+                above = run.clone().find(|&u| u as i64 >= next);
+            }
+            if let Some(u) = run.rfind(|&u| (u as i64) < next) {
+                below = Some(u);
+            }
+        }
         let cost = |u: u32| zigzag32((u as i64 - next) as i32);
-        [at.checked_sub(1), Some(at)]
-            .into_iter()
-            .flatten()
-            .filter_map(|i| run.get(i))
-            .map(|&(_, u)| u)
-            .min_by_key(|&u| cost(u))
-            .map(|u| u as usize)
+        [below, above].into_iter().flatten().min_by_key(|&u| cost(u)).map(|u| u as usize)
     }
 }
 
@@ -486,7 +518,7 @@ fn planes_for<const N: usize>(values: &[[u32; N]], least: usize) -> usize {
 /// such one, without residuals; else one equal to a vertex of the page's sources (`sources`,
 /// empty for a page that must decode alone) as a far copy of it. `None` if the index codec
 /// fails.
-pub(crate) fn encode_page(clusters: &[Quantized], flags: u32, sources: &SourceIndex) -> Option<Vec<Vec<u8>>> {
+pub(crate) fn encode_page(clusters: &[Quantized], flags: u32, sources: &SourceIndex<'_>) -> Option<Vec<Vec<u8>>> {
     let mut edges = EdgeTable::new();
     let (mut lengths, mut coded, mut marks) = (Vec::new(), Vec::new(), Vec::new());
     let (mut pos, mut nrm, mut uvs) = (Vec::new(), Vec::new(), Vec::new());
@@ -797,7 +829,7 @@ pub(crate) mod tests {
     fn pages_round_trip_exactly() {
         let clusters = vec![sample(3, 5), sample(256, -7), sample(40, 1 << 30)];
         let flags = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS;
-        let bytes: Vec<u8> = encode_page(&clusters, flags, &SourceIndex::new(&[])).unwrap().concat();
+        let bytes: Vec<u8> = encode_page(&clusters, flags, &SourceIndex::new([])).unwrap().concat();
         assert_eq!(decode_page(&bytes, &records(&clusters), flags, 10, &[]), Ok(clusters.clone()));
         // A normal above the header's range is refused.
         assert!(decode_page(&bytes, &records(&clusters), flags, 9, &[]).is_err());
@@ -806,7 +838,7 @@ pub(crate) mod tests {
             .iter()
             .map(|c| Quantized { normals: vec![], uvs: vec![], materials: vec![], ..c.clone() })
             .collect();
-        let bytes: Vec<u8> = encode_page(&bare, 0, &SourceIndex::new(&[])).unwrap().concat();
+        let bytes: Vec<u8> = encode_page(&bare, 0, &SourceIndex::new([])).unwrap().concat();
         assert_eq!(decode_page(&bytes, &records(&bare), 0, 0, &[]), Ok(bare.clone()));
         // One byte more or less is refused.
         assert!(decode_page(&bytes[..bytes.len() - 1], &records(&bare), 0, 0, &[]).is_err());
@@ -836,7 +868,7 @@ pub(crate) mod tests {
     /// The encoded page of [`repeating`] with every attribute, and its copies' count.
     pub(crate) fn repeating_page() -> (Vec<Quantized>, Vec<Vec<u8>>) {
         let clusters = repeating();
-        let streams = encode_page(&clusters, FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS, &SourceIndex::new(&[])).unwrap();
+        let streams = encode_page(&clusters, FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS, &SourceIndex::new([])).unwrap();
         (clusters, streams)
     }
 
@@ -854,7 +886,7 @@ pub(crate) mod tests {
         // Copies carry no residuals: the page is shorter than the same page stored whole.
         let unique: Vec<Quantized> = (0..3).map(|i| sample([40, 60, 40][i], 100 * i as i32 + 1)).collect();
         assert!(
-            bytes.len() + 55 * 12 <= encode_page(&unique, flags, &SourceIndex::new(&[])).unwrap().concat().len() + 140
+            bytes.len() + 55 * 12 <= encode_page(&unique, flags, &SourceIndex::new([])).unwrap().concat().len() + 140
         );
     }
 

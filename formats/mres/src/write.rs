@@ -370,8 +370,7 @@ fn compress_page(
 ) -> Result<Vec<u8>, WriteError> {
     let (raw, _) = assemble_page(clusters);
     let quantized: Vec<Quantized> = clusters.iter().map(|c| c.quantized(header.flags)).collect();
-    let keys: Vec<codec::VertexKey> = sources.iter().flat_map(|s| s.keys.iter().copied()).collect();
-    let index = codec::SourceIndex::new(&keys);
+    let index = codec::SourceIndex::new(sources.iter().map(|s| &s.keys));
     let codec_bug = || WriteError::BadDag("the page encoding does not decode to the page (a writer bug)".into());
     let streams = codec::encode_page(&quantized, header.flags, &index).ok_or_else(codec_bug)?;
     let encoded = streams.concat();
@@ -405,7 +404,8 @@ fn compress_page(
 /// What the pages that copy vertices of a page read of it (FORMAT.md §4.3): its vertices'
 /// keys in source numbering, and its GPU layout and cluster records, as a reader holds them.
 struct SourceData {
-    keys: Vec<codec::VertexKey>,
+    /// Its vertices by key, for the far copies of the pages it is a source of.
+    keys: codec::SortedKeys,
     layout: Vec<u8>,
     records: Vec<ClusterInfo>,
 }
@@ -414,7 +414,7 @@ impl SourceData {
     fn new(clusters: &[&EncodedCluster], flags: u32) -> SourceData {
         let quantized: Vec<Quantized> = clusters.iter().map(|c| c.quantized(flags)).collect();
         SourceData {
-            keys: codec::source_keys(&quantized),
+            keys: codec::SortedKeys::new(&codec::source_keys(&quantized)),
             layout: assemble_page(clusters).0,
             records: page_records(clusters),
         }
@@ -894,7 +894,7 @@ mod tests {
                 })
                 .collect();
             let records = records(&clusters);
-            let bytes: Vec<u8> = codec::encode_page(&clusters, flags, &codec::SourceIndex::new(&[])).unwrap().concat();
+            let bytes: Vec<u8> = codec::encode_page(&clusters, flags, &codec::SourceIndex::new([])).unwrap().concat();
             let gpu = gpu_page(&clusters, flags);
             assert_eq!(decode::decode_page_gpu(&bytes, &records, flags, 10, gpu.len(), None), Ok(gpu.clone()));
             // Any other raw size is refused.
@@ -967,7 +967,9 @@ mod tests {
         let (source_pages, clusters) = far_pages();
         let sources = Sources::new(&source_pages, flags);
         let records = records(&clusters);
-        let streams = codec::encode_page(&clusters, flags, &codec::SourceIndex::new(&sources.keys)).unwrap();
+        let streams =
+            codec::encode_page(&clusters, flags, &codec::SourceIndex::new([&codec::SortedKeys::new(&sources.keys)]))
+                .unwrap();
         let bytes = streams.concat();
         let references = &streams[4];
         // Four of the second cluster's source vertices are in the first cluster too (copied
@@ -979,7 +981,7 @@ mod tests {
         assert_eq!(decoded, Ok(gpu.clone()));
         assert_eq!(codec::decode_page(&bytes, &records, flags, 10, &sources.keys), Ok(clusters.clone()));
         // Without far copies: the same layout, more bytes; and no sources are needed.
-        let alone = codec::encode_page(&clusters, flags, &codec::SourceIndex::new(&[])).unwrap().concat();
+        let alone = codec::encode_page(&clusters, flags, &codec::SourceIndex::new([])).unwrap().concat();
         assert!(alone.len() >= bytes.len() + 32 * 8, "{} bytes, {} alone", bytes.len(), alone.len());
         assert_eq!(decode::decode_page_gpu(&alone, &records, flags, 10, gpu.len(), None), Ok(gpu.clone()));
         // Without its sources the page is refused.
@@ -1019,12 +1021,25 @@ mod tests {
     #[test]
     fn far_copies_name_the_nearest_equal_source_vertex() {
         let keys: Vec<codec::VertexKey> = [5, 7, 5, 9, 5].iter().map(|&x| ([x, 0, 0], [0; 2], [0; 2])).collect();
-        let index = codec::SourceIndex::new(&keys);
+        let sorted = codec::SortedKeys::new(&keys);
+        let index = codec::SourceIndex::new([&sorted]);
         let five = ([5, 0, 0], [0; 2], [0; 2]);
         assert_eq!(index.nearest(&five, 0), Some(0));
         assert_eq!(index.nearest(&five, 2), Some(2));
         assert_eq!(index.nearest(&five, 3), Some(2)); // −1 codes smaller than +1
         assert_eq!(index.nearest(&five, 9), Some(4));
         assert_eq!(index.nearest(&([6, 0, 0], [0; 2], [0; 2]), 0), None);
+        // The same vertices as the pages of several sources: numbered on across them, and the
+        // same answers, wherever the split falls.
+        for split in 0..=keys.len() {
+            let (a, b) = (codec::SortedKeys::new(&keys[..split]), codec::SortedKeys::new(&keys[split..]));
+            let two = codec::SourceIndex::new([&a, &b]);
+            for x in 4..=10 {
+                for next in -2..12 {
+                    let k = ([x, 0, 0], [0; 2], [0; 2]);
+                    assert_eq!(two.nearest(&k, next), index.nearest(&k, next), "split {split}, {x}, {next}");
+                }
+            }
+        }
     }
 }
