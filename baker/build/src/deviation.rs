@@ -14,6 +14,7 @@
 //! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
 //! with their worst spots locked ([`simplify_measured`]).
 
+use crate::partition::morton_codes;
 use crate::samples::{sample_point, set_bits, Owned, Samples, CENTROID, NOT_FOUND};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Locks, Simplified};
@@ -21,6 +22,7 @@ use crate::weld::WeldedMesh;
 use mres_geom::bvh::{Bvh, Triangle};
 use mres_geom::edges::edge_key;
 use mres_geom::parts::{diagonals, UnionFind};
+use mres_geom::walk::Neighbours;
 use rayon::prelude::*;
 
 /// The sampled distance is scaled by this before it is added: the samples (vertices, edge
@@ -179,24 +181,72 @@ fn radius(t: &Triangle<f32>) -> f32 {
 }
 
 /// The whole level-0 surface of a welded mesh, in object coordinates, for measuring output
-/// samples against (see `measure`).
+/// samples against (see `measure`). Its triangles are in Morton order of their centroids, so
+/// that a walk's neighbours and a query's leaves lie near each other in memory: the surface of
+/// a large mesh is far beyond the caches, and a query's cost was mostly its memory reads.
 pub struct Original {
     tris: Vec<Triangle<f32>>,
+    /// Per triangle of `tris`, its index in the mesh's `indices`.
+    source: Vec<u32>,
     bvh: Bvh<f32>,
+    /// For walking from the previous sample's triangle to the next sample (see [`Original::within`]).
+    neighbours: Neighbours,
     /// Bound on the f32 rounding of a distance at these coordinates.
     slack: f64,
 }
+
+/// Most steps of a walk on the original surface before the hierarchy takes over: output samples
+/// lie a few level-0 triangles from the previous one at the lower levels, where most queries are.
+const WALK_STEPS: usize = 8;
 
 impl Original {
     /// The level-0 triangles of `mesh` (its `indices`).
     pub fn new(mesh: &WeldedMesh) -> Original {
         let p = |v: u32| mesh.positions[v as usize];
-        let tris: Vec<Triangle<f32>> = mesh.indices.chunks_exact(3).map(|t| [p(t[0]), p(t[1]), p(t[2])]).collect();
+        let centroids: Vec<[f32; 3]> = mesh
+            .indices
+            .par_chunks_exact(3)
+            .map(|t| [0, 1, 2].map(|k| (p(t[0])[k] + p(t[1])[k] + p(t[2])[k]) * (1.0 / 3.0)))
+            .collect();
+        let mut order: Vec<(u32, u32)> =
+            morton_codes(&centroids).into_iter().enumerate().map(|(t, code)| (code, t as u32)).collect();
+        order.par_sort_unstable();
+        let source: Vec<u32> = order.into_iter().map(|(_, t)| t).collect();
+        let corners = |t: u32| &mesh.indices[t as usize * 3..t as usize * 3 + 3];
+        let tris: Vec<Triangle<f32>> = source
+            .par_iter()
+            .map(|&t| {
+                let c = corners(t);
+                [p(c[0]), p(c[1]), p(c[2])]
+            })
+            .collect();
+        let ids: Vec<u32> =
+            source.iter().flat_map(|&t| corners(t).iter().map(|&v| mesh.position_ids[v as usize])).collect();
         let largest = mesh.positions.iter().flatten().fold(0.0f32, |m, &x| m.max(x.abs()));
         // Rounding of the subtractions, products and sums: a few dozen ulps of the largest
         // coordinate (far below the position grid's step).
         let slack = 64.0 * f32::EPSILON as f64 * largest as f64;
-        Original { bvh: Bvh::new(&tris), tris, slack }
+        Original { bvh: Bvh::new(&tris), neighbours: Neighbours::new(&ids), tris, source, slack }
+    }
+
+    /// The welded vertex ids of triangle `t` (as [`Original::within`] names it).
+    fn corners<'m>(&self, mesh: &'m WeldedMesh, t: usize) -> &'m [u32] {
+        let t = self.source[t] as usize;
+        &mesh.indices[t * 3..t * 3 + 3]
+    }
+
+    /// [`Bvh::within_squared`] on the original surface, after a walk from `hint` (the previous
+    /// query's triangle) that settles most queries with a triangle or two: the answer is the
+    /// same where it matters, beyond `enough2` (the nearest triangle).
+    fn within(&self, p: [f32; 3], enough2: f32, hint: usize) -> (f32, usize) {
+        if hint >= self.tris.len() {
+            return self.bvh.within_squared(&self.tris, p, enough2, hint);
+        }
+        let (d2, t) = self.neighbours.walk(&self.tris, p, enough2, hint, WALK_STEPS);
+        if d2 <= enough2 {
+            return (d2, t);
+        }
+        self.bvh.within_squared(&self.tris, p, enough2, t)
     }
 }
 
@@ -316,12 +366,12 @@ fn measure(
                 let d = ((worst / SAMPLING_MARGIN - o.slack).max(0.0)) as f32;
                 let enough = hot2.map_or(d * d, |h| h.min(d * d));
                 // Which triangle within `enough` does not matter here, only a distance beyond.
-                let (d2, nearest) = o.bvh.within_squared(&o.tris, p, enough, hint);
+                let (d2, nearest) = o.within(p, enough, hint);
                 hint = nearest;
                 if d2 > enough {
                     worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + o.slack));
                     if hot2.is_some_and(|h| d2 > h) {
-                        hot.extend(mesh.indices[nearest * 3..nearest * 3 + 3].iter().chain(t).map(|&v| id(v)));
+                        hot.extend(o.corners(mesh, nearest).iter().chain(t).map(|&v| id(v)));
                     }
                 }
             }

@@ -1,0 +1,167 @@
+//! Walking a triangle mesh towards a point: from a triangle near it, step to the neighbour
+//! across the edge that the point's closest point lies on, until a triangle is close enough.
+//!
+//! The measured errors query millions of points that lie a fraction of a triangle from the
+//! previous query's answer (samples in spatial order). A hierarchy query that misses its hint
+//! tests that triangle's leaf and then climbs or descends the tree, about seven triangles on the
+//! baker's lower levels; a walk usually reaches a close-enough triangle in one or two steps.
+//! It is only a shortcut: a walk that stops (a border, a fold, a local minimum, too many steps)
+//! leaves the query to the hierarchy, starting from the closest triangle it saw.
+//!
+//! No library walks a general triangle soup in 3-D by closest-point regions (triangulation
+//! crates walk planar Delaunay meshes), so this is written here.
+
+use crate::bvh::{point_triangle_distance2, Real, Triangle};
+use crate::edges::edge_key;
+use rayon::prelude::*;
+
+/// No triangle across this edge: an open border, or an edge with more than two triangles.
+const NONE: u32 = u32::MAX;
+
+/// Per triangle, the triangle across each of its edges (edge k from corner k to corner k + 1).
+pub struct Neighbours {
+    across: Vec<[u32; 3]>,
+}
+
+impl Neighbours {
+    /// The neighbours of the triangles whose corners are `corners` (three per triangle):
+    /// position ids, so that copies of a vertex on an attribute seam join.
+    pub fn new(corners: &[u32]) -> Neighbours {
+        let triangles = corners.len() / 3;
+        let mut edges: Vec<(u64, u32)> =
+            (0..triangles * 3).map(|s| (edge_key(corners[s], corners[s - s % 3 + (s + 1) % 3]), s as u32)).collect();
+        if edges.len() > 64 * 1024 {
+            edges.par_sort_unstable();
+        } else {
+            edges.sort_unstable();
+        }
+        let mut across = vec![[NONE; 3]; triangles];
+        for run in edges.chunk_by(|a, b| a.0 == b.0) {
+            if let [(_, a), (_, b)] = run {
+                across[*a as usize / 3][*a as usize % 3] = b / 3;
+                across[*b as usize / 3][*b as usize % 3] = a / 3;
+            }
+        }
+        Neighbours { across }
+    }
+
+    /// From triangle `start` (of `tris`, the triangles this was made from), walks towards `p`
+    /// for at most `steps` steps and returns the squared distance to the first triangle within
+    /// `enough2` of `p`, or to the closest one it tested, and that triangle.
+    pub fn walk<T: Real>(&self, tris: &[Triangle<T>], p: [T; 3], enough2: T, start: usize, steps: usize) -> (T, usize) {
+        let mut at = start;
+        let mut best = (point_triangle_distance2(p, &tris[at]), at);
+        let mut from = NONE;
+        for _ in 0..steps {
+            if best.0 <= enough2 {
+                break;
+            }
+            // At a corner, the other edge of the corner where the first leads nowhere new.
+            let Some([first, second]) = exit_edges(p, &tris[at]) else { break };
+            let open = |e: usize| {
+                let t = self.across[at][e];
+                (t != NONE && t != from).then_some(t)
+            };
+            let Some(next) = open(first).or_else(|| open(second)) else { break };
+            (from, at) = (at as u32, next as usize);
+            let d = point_triangle_distance2(p, &tris[at]);
+            if d < best.0 {
+                best = (d, at);
+            }
+        }
+        best
+    }
+}
+
+/// The edge (k: from corner k to corner k + 1) beyond which the closest point of triangle `t`
+/// to `p` lies, by Ericson's regions ("Real-Time Collision Detection" §5.1.5), twice; for a
+/// corner, its two edges, the one that points more towards `p` first; `None` where the closest
+/// point is inside the face.
+fn exit_edges<T: Real>(p: [T; 3], t: &Triangle<T>) -> Option<[usize; 2]> {
+    let sub = |a: [T; 3], b: [T; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [T; 3], b: [T; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let zero = T::ZERO;
+    let (a, b, c) = (t[0], t[1], t[2]);
+    let (ab, ac) = (sub(b, a), sub(c, a));
+    let (ap, bp, cp) = (sub(p, a), sub(p, b), sub(p, c));
+    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    // Corner A: towards B (edge 0) or towards C (edge 2), whichever p leans to.
+    if d1 <= zero && d2 <= zero {
+        return Some(if d1 >= d2 { [0, 2] } else { [2, 0] });
+    }
+    // Corner B: towards A (edge 0, along −ab) or towards C (edge 1, along ac − ab).
+    if d3 >= zero && d4 <= d3 {
+        return Some(if zero - d3 >= d4 - d3 { [0, 1] } else { [1, 0] });
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= zero && d1 >= zero && d3 <= zero {
+        return Some([0; 2]);
+    }
+    // Corner C: towards A (edge 2, along −ac) or towards B (edge 1, along ab − ac).
+    if d6 >= zero && d5 <= d6 {
+        return Some(if zero - d6 >= d5 - d6 { [2, 1] } else { [1, 2] });
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= zero && d2 >= zero && d6 <= zero {
+        return Some([2; 2]);
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= zero && (d4 - d3) >= zero && (d5 - d6) >= zero {
+        return Some([1; 2]);
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A flat `n` × `n` grid of unit squares, two triangles each, and its corners' ids.
+    fn grid(n: u32) -> (Vec<Triangle<f64>>, Vec<u32>) {
+        let id = |x: u32, y: u32| y * (n + 1) + x;
+        let at = |v: u32| [(v % (n + 1)) as f64, (v / (n + 1)) as f64, 0.0];
+        let mut corners = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let (a, b, c, d) = (id(x, y), id(x + 1, y), id(x + 1, y + 1), id(x, y + 1));
+                corners.extend_from_slice(&[a, b, c, a, c, d]);
+            }
+        }
+        let tris = corners.chunks_exact(3).map(|t| [at(t[0]), at(t[1]), at(t[2])]).collect();
+        (tris, corners)
+    }
+
+    #[test]
+    fn neighbours_pair_up_inner_edges_only() {
+        let (_, corners) = grid(3);
+        let n = Neighbours::new(&corners);
+        // Each square's diagonal joins its two triangles; the grid's outline has no neighbour.
+        assert_eq!(n.across[0][2], 1);
+        assert_eq!(n.across[1][0], 0);
+        let open = n.across.iter().flatten().filter(|&&t| t == NONE).count();
+        assert_eq!(open, 12);
+        // A third triangle on an edge leaves it without neighbours.
+        let mut more = corners.clone();
+        more.extend_from_slice(&[0, 5, 17]);
+        assert_eq!(Neighbours::new(&more).across[0][2], NONE);
+    }
+
+    #[test]
+    fn walks_reach_the_triangle_under_the_point() {
+        let (tris, corners) = grid(8);
+        let n = Neighbours::new(&corners);
+        let p = [6.7, 5.2, 0.25];
+        let (d2, t) = n.walk(&tris, p, 0.0625 + 1e-9, 0, 64);
+        assert!(d2 <= 0.0625 + 1e-9, "{d2}");
+        assert_eq!(point_triangle_distance2(p, &tris[t]), d2);
+        assert!((0..3).all(|k| (tris[t][k][0] - 6.5).abs() <= 0.5 + 1e-9 && (tris[t][k][1] - 5.5).abs() <= 0.5 + 1e-9));
+        // Too few steps: the closest triangle seen, farther than enough.
+        let (d2, t) = n.walk(&tris, p, 0.0625, 0, 2);
+        assert!(d2 > 0.0625 && point_triangle_distance2(p, &tris[t]) == d2);
+        // Outside the grid: the walk stops at the border, at a triangle touching it.
+        let (d2, _) = n.walk(&tris, [-3.0, 4.5, 0.0], 0.0, 0, 64);
+        assert!((d2 - 9.0).abs() < 1e-9, "{d2}");
+    }
+}
