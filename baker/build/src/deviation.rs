@@ -22,7 +22,7 @@ use crate::weld::WeldedMesh;
 use mres_geom::bvh::{Bvh, Triangle};
 use mres_geom::edges::edge_key;
 use mres_geom::parts::{diagonals, UnionFind};
-use mres_geom::walk::Neighbours;
+use mres_geom::walk::Surface;
 use rayon::prelude::*;
 
 /// The sampled distance is scaled by this before it is added: the samples (vertices, edge
@@ -185,12 +185,10 @@ fn radius(t: &Triangle<f32>) -> f32 {
 /// that a walk's neighbours and a query's leaves lie near each other in memory: the surface of
 /// a large mesh is far beyond the caches, and a query's cost was mostly its memory reads.
 pub struct Original {
-    tris: Vec<Triangle<f32>>,
-    /// Per triangle of `tris`, its index in the mesh's `indices`.
+    /// Its triangles, walked from the previous sample's triangle to the next sample.
+    surface: Surface<f32>,
+    /// Per triangle of `surface`, its index in the mesh's `indices`.
     source: Vec<u32>,
-    bvh: Bvh<f32>,
-    /// For walking from the previous sample's triangle to the next sample (see [`Original::within`]).
-    neighbours: Neighbours,
     /// Bound on the f32 rounding of a distance at these coordinates.
     slack: f64,
 }
@@ -226,27 +224,13 @@ impl Original {
         // Rounding of the subtractions, products and sums: a few dozen ulps of the largest
         // coordinate (far below the position grid's step).
         let slack = 64.0 * f32::EPSILON as f64 * largest as f64;
-        Original { bvh: Bvh::new(&tris), neighbours: Neighbours::new(&ids), tris, source, slack }
+        Original { surface: Surface::new(tris, &ids), source, slack }
     }
 
-    /// The welded vertex ids of triangle `t` (as [`Original::within`] names it).
+    /// The welded vertex ids of triangle `t` (of `surface`).
     fn corners<'m>(&self, mesh: &'m WeldedMesh, t: usize) -> &'m [u32] {
         let t = self.source[t] as usize;
         &mesh.indices[t * 3..t * 3 + 3]
-    }
-
-    /// [`Bvh::within_squared`] on the original surface, after a walk from `hint` (the previous
-    /// query's triangle) that settles most queries with a triangle or two: the answer is the
-    /// same where it matters, beyond `enough2` (the nearest triangle).
-    fn within(&self, p: [f32; 3], enough2: f32, hint: usize) -> (f32, usize) {
-        if hint >= self.tris.len() {
-            return self.bvh.within_squared(&self.tris, p, enough2, hint);
-        }
-        let (d2, t) = self.neighbours.walk(&self.tris, p, enough2, hint, WALK_STEPS);
-        if d2 <= enough2 {
-            return (d2, t);
-        }
-        self.bvh.within_squared(&self.tris, p, enough2, t)
     }
 }
 
@@ -366,7 +350,7 @@ fn measure(
                 let d = ((worst / SAMPLING_MARGIN - o.slack).max(0.0)) as f32;
                 let enough = hot2.map_or(d * d, |h| h.min(d * d));
                 // Which triangle within `enough` does not matter here, only a distance beyond.
-                let (d2, nearest) = o.within(p, enough, hint);
+                let (d2, nearest) = o.surface.within_squared(p, enough, hint, WALK_STEPS);
                 hint = nearest;
                 if d2 > enough {
                     worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + o.slack));
@@ -395,9 +379,11 @@ fn measure(
     }
 
     // Input → output, in runs measured in parallel (large groups are few, at the top levels).
-    let output_bvh = Bvh::new(&output_tris);
+    let ids: Vec<u32> = output.iter().map(|&v| id(v)).collect();
+    let output_surface = Surface::new(output_tris, &ids);
+    let output_tris = &output_surface.tris;
     if sides.owned.is_some() {
-        let output = (&output_bvh, &output_tris[..]);
+        let output = (output_surface.bvh(), &output_tris[..]);
         let bound = |e: f32| limits.enough2(worst, e as f64).sqrt();
         let input = (&input_tris[..], &reach_of[..]);
         accept_patches(input, (&mut input_duty, &mut found), output, triangle_errors, bound);
@@ -409,7 +395,7 @@ fn measure(
         .enumerate()
         .map(|(k, found)| {
             let first = k * RUN_TRIANGLES;
-            side.measure(first, found, (&output_bvh, &output_tris), part_size, worst, limits)
+            side.measure(first, found, &output_surface, part_size, worst, limits)
         })
         .collect();
     for (run_worst, run_hot) in runs {
@@ -481,7 +467,7 @@ impl InputSide<'_> {
         &self,
         first: usize,
         found: &mut [u32],
-        (bvh, output): (&Bvh<f32>, &[Triangle<f32>]),
+        output: &Surface<f32>,
         part_size: &[f32],
         mut worst: f64,
         limits: Limits,
@@ -496,7 +482,7 @@ impl InputSide<'_> {
                 let e = self.errors[i] + self.reach[i];
                 for b in set_bits(self.duty[i] & pass) {
                     let enough = limits.enough2(worst, e as f64);
-                    let (d2, nearest) = bvh.nearest_squared(output, sample_point(tri, b), enough, hint);
+                    let (d2, nearest) = output.nearest_squared(sample_point(tri, b), enough, hint, WALK_STEPS);
                     hint = nearest;
                     if self.reach[i] > 0.0 {
                         // A ball, measured at its centre.
@@ -539,35 +525,80 @@ fn accept_patches(
     (duty, found): (&mut [u8], &mut [u32]),
     (bvh, output): (&Bvh<f32>, &[Triangle<f32>]),
     triangle_errors: &[f32],
-    bound: impl Fn(f32) -> f32,
+    bound: impl Fn(f32) -> f32 + Sync,
 ) {
     if input.is_empty() {
         return;
     }
     let boxes = BoxPyramid::new((input, reach), duty, triangle_errors);
-    let mut hint = usize::MAX;
-    let mut stack = vec![(boxes.levels.len() - 1, 0)];
-    while let Some((level, k)) = stack.pop() {
-        let Some((center, radius)) = boxes.sphere(level, k) else { continue };
-        let run = k << level..((k + 1) << level).min(input.len());
-        let limit = bound(boxes.errors[level][k]);
-        if radius < 0.5 * limit {
-            let enough = (limit - radius) * (limit - radius);
-            let (d2, nearest) = bvh.nearest_squared(output, center, enough, hint);
-            hint = nearest;
-            if d2 <= enough {
-                for i in run.clone() {
-                    for b in set_bits(duty[i]) {
-                        found[7 * i + b] = nearest as u32;
+    let patches = Patches { boxes: &boxes, bvh, output, bound: &bound };
+    // The patches above runs of 2^PATCH_RUN entries first, then each such run left unsettled
+    // on its own, side by side (a group's runs are many only at the top levels, where one group
+    // holds every level-0 triangle); the same for any thread count.
+    let top = boxes.levels.len() - 1;
+    if top <= PATCH_RUN {
+        patches.settle((top, 0), 0, (duty, found), 0, |_| {});
+        return;
+    }
+    let mut open = vec![false; input.len().div_ceil(1 << PATCH_RUN)];
+    patches.settle((top, 0), PATCH_RUN, (duty, found), 0, |k| open[k] = true);
+    let runs = duty.par_chunks_mut(1 << PATCH_RUN).zip(found.par_chunks_mut(7 << PATCH_RUN));
+    runs.enumerate().filter(|(k, _)| open[*k]).for_each(|(k, (duty, found))| {
+        patches.settle((PATCH_RUN, k), 0, (duty, found), k << PATCH_RUN, |_| {});
+    });
+}
+
+/// Entries of a run whose patches [`accept_patches`] tries on its own: 2^12, as
+/// `RUN_TRIANGLES`.
+const PATCH_RUN: usize = 12;
+
+/// What [`accept_patches`] settles patches with.
+struct Patches<'a, F> {
+    boxes: &'a BoxPyramid,
+    bvh: &'a Bvh<f32>,
+    output: &'a [Triangle<f32>],
+    bound: &'a F,
+}
+
+impl<F: Fn(f32) -> f32> Patches<'_, F> {
+    /// Settles what it can of the subtree of pyramid node `root` (level, index), down to
+    /// level `floor`, whose unsettled nodes go to `open` (by index); `duty` and `found` are
+    /// the entries' from entry `first` on.
+    fn settle(
+        &self,
+        root: (usize, usize),
+        floor: usize,
+        (duty, found): (&mut [u8], &mut [u32]),
+        first: usize,
+        mut open: impl FnMut(usize),
+    ) {
+        let boxes = self.boxes;
+        let mut hint = usize::MAX;
+        let mut stack = vec![root];
+        while let Some((level, k)) = stack.pop() {
+            let Some((center, radius)) = boxes.sphere(level, k) else { continue };
+            let limit = (self.bound)(boxes.errors[level][k]);
+            if radius < 0.5 * limit {
+                let enough = (limit - radius) * (limit - radius);
+                let (d2, nearest) = self.bvh.nearest_squared(self.output, center, enough, hint);
+                hint = nearest;
+                if d2 <= enough {
+                    let run = (k << level) - first..((k + 1) << level).min(first + duty.len()) - first;
+                    for i in run {
+                        for b in set_bits(duty[i]) {
+                            found[7 * i + b] = nearest as u32;
+                        }
+                        duty[i] = 0;
                     }
-                    duty[i] = 0;
+                    continue;
                 }
-                continue;
             }
-        }
-        if level > 0 {
-            let children = [(level - 1, 2 * k + 1), (level - 1, 2 * k)];
-            stack.extend(children.into_iter().filter(|&(l, c)| c < boxes.levels[l].len()));
+            if level == floor {
+                open(k);
+            } else {
+                let children = [(level - 1, 2 * k + 1), (level - 1, 2 * k)];
+                stack.extend(children.into_iter().filter(|&(l, c)| c < boxes.levels[l].len()));
+            }
         }
     }
 }
@@ -599,7 +630,8 @@ impl BoxPyramid {
             let hi = [0, 1, 2].map(|k| greater(greater(t[0][k], t[1][k]), t[2][k]) + r);
             (lo, hi)
         };
-        let mut levels = vec![triangles.iter().zip(duty).zip(reach).map(one).collect::<Vec<_>>()];
+        let mut levels =
+            vec![triangles.par_iter().zip(duty).zip(reach).with_min_len(4096).map(one).collect::<Vec<_>>()];
         while levels[levels.len() - 1].len() > 1 {
             let union = |p: &[([f32; 3], [f32; 3])]| {
                 let (mut lo, mut hi) = p[0];
@@ -610,13 +642,13 @@ impl BoxPyramid {
                 }
                 (lo, hi)
             };
-            let next = levels[levels.len() - 1].chunks(2).map(union).collect();
+            let next = levels[levels.len() - 1].par_chunks(2).with_min_len(2048).map(union).collect();
             levels.push(next);
         }
         let mut error_levels = vec![errors.to_vec()];
         while error_levels.len() < levels.len() {
             let largest = |p: &[f32]| p.iter().copied().fold(0.0, f32::max);
-            let next = error_levels[error_levels.len() - 1].chunks(2).map(largest).collect();
+            let next = error_levels[error_levels.len() - 1].par_chunks(2).with_min_len(2048).map(largest).collect();
             error_levels.push(next);
         }
         BoxPyramid { levels, errors: error_levels }
@@ -711,7 +743,8 @@ fn duties(
             kept[id(v) as usize] = true;
         }
         let input_duty = input
-            .chunks_exact(3)
+            .par_chunks_exact(3)
+            .with_min_len(4096)
             .map(|t| (0..3).filter(|&k| kept[id(t[k]) as usize]).fold(0x7fu8, |d, k| d & !(1 << k)))
             .collect();
         let mut output_duty = vec![64u8; output.len() / 3];

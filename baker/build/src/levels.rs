@@ -321,7 +321,7 @@ impl<'a> Builder<'a> {
             Reference { triangles, errors, owned: None, members_error, original: None, lenient }
         } else {
             let errors = vec![0.0; owned.len()];
-            let triangles = Cow::Owned(owned.iter().flat_map(|o| o.corners()).collect());
+            let triangles = Cow::Owned(owned.par_iter().with_min_len(4096).flat_map_iter(|o| o.corners()).collect());
             let original = self.original.as_ref();
             Reference { triangles, errors, owned: Some(owned), members_error, original, lenient }
         }

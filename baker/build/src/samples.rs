@@ -15,6 +15,8 @@
 
 use crate::weld::WeldedMesh;
 use mres_geom::bvh::{Bvh, Triangle};
+use rayon::prelude::*;
+use std::sync::OnceLock;
 
 /// A run of samples handed down becomes a ball when its enclosing sphere's radius is at most
 /// this fraction of the error of the group it was handed down by (the next group's members'
@@ -28,6 +30,9 @@ pub const BALL_FRACTION: f64 = 0.2;
 /// the measure (one query per settled run) do the same work for less, and gathering would cost
 /// more than it saves. Measured: see docs/BENCHMARKS.md (bake time).
 pub const GATHER_RATIO: usize = 32;
+
+/// Joined lists longer than this are sorted on every thread by [`merge_owned`].
+const PARALLEL_MERGE: usize = 64 * 1024;
 
 /// The centroid's bit among a triangle's samples (see [`Samples::Triangle`]).
 pub const CENTROID: u8 = 1 << 6;
@@ -120,8 +125,13 @@ pub fn sort_owned(owned: &mut [Owned]) {
 pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
     let mut all: Vec<Owned> = owned.collect();
     // Each member's list is sorted (see `assign_owned`, and level 0's): the stable sort merges
-    // such runs instead of sorting from scratch, and on a total order it gives the same result.
-    all.sort_by(Owned::order);
+    // such runs instead of sorting from scratch, and on a total order it gives the same result
+    // (on every thread for the large groups of the top levels).
+    if all.len() > PARALLEL_MERGE {
+        all.par_sort_by(Owned::order);
+    } else {
+        all.sort_by(Owned::order);
+    }
     // In place: a triangle's entries are adjacent, the first one kept gets the bits of all.
     all.dedup_by(|next, kept| match (next.samples, &mut kept.samples) {
         (Samples::Triangle(t, bits), Samples::Triangle(k, kept_bits)) if t == *k => {
@@ -178,48 +188,23 @@ pub fn assign_owned(
     for (s, &v) in output.iter().enumerate() {
         at_corner.entry(id(v)).or_insert(s as u32 / 3);
     }
-    let mut bvh: Option<Bvh<f32>> = None;
+    let bvh: OnceLock<Bvh<f32>> = OnceLock::new();
     let close2 = error * error;
-    let mut hint = usize::MAX;
     // Not measured and not a kept corner: the output triangle nearest to it.
-    let mut search = |p: [f32; 3], hint: usize| {
-        let bvh = bvh.get_or_insert_with(|| Bvh::new(&tris));
-        bvh.nearest_squared(&tris, p, close2 / 16.0, hint).1
-    };
+    let search =
+        |p: [f32; 3], hint: usize| bvh.get_or_init(|| Bvh::new(&tris)).nearest_squared(&tris, p, close2 / 16.0, hint).1;
+    let to = Destinations { output_child: &output_child, at_corner: &at_corner, search: &search };
+    // Runs of a fixed size side by side (one group holds every level-0 sample at the top
+    // levels), each handed down on its own and joined in order: the same for any thread count.
+    let runs: Vec<Vec<Vec<Owned>>> = owned
+        .par_chunks(HAND_DOWN_RUN)
+        .enumerate()
+        .map(|(r, run)| hand_down(mesh, run, &found[(7 * r * HAND_DOWN_RUN).min(found.len())..], &to, children.len()))
+        .collect();
     let mut out = vec![Vec::new(); children.len()];
-    let mut bits = vec![0u8; children.len()];
-    for (i, o) in owned.iter().enumerate() {
-        let f = |b: usize| found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
-        let (t, mask) = match o.samples {
-            Samples::Ball(ball) => {
-                hint = match f(6) {
-                    NOT_FOUND => search(ball.center, hint),
-                    f => f as usize,
-                };
-                out[output_child[hint] as usize].push(*o);
-                continue;
-            }
-            Samples::Triangle(t, mask) => (t, mask),
-        };
-        let (mut touched, mut count) = ([0usize; 7], 0);
-        for b in set_bits(mask) {
-            // Looked up only for an unmeasured corner (most samples were measured).
-            let kept = || if b < 3 { at_corner.get(&id(t[b])) } else { None };
-            let nearest = match f(b) {
-                NOT_FOUND if let Some(&k) = kept() => k as usize,
-                NOT_FOUND => search(sample_point(&t.map(point), b), hint),
-                f => f as usize,
-            };
-            hint = nearest;
-            let c = output_child[nearest] as usize;
-            if bits[c] == 0 {
-                touched[count] = c;
-                count += 1;
-            }
-            bits[c] |= 1 << b;
-        }
-        for &c in &touched[..count] {
-            out[c].push(Owned::triangle(o.code, t, std::mem::take(&mut bits[c])));
+    for run in runs {
+        for (list, more) in out.iter_mut().zip(run) {
+            list.extend(more);
         }
     }
     let limit = BALL_FRACTION * error as f64;
@@ -230,7 +215,64 @@ pub fn assign_owned(
             list
         }
     };
-    out.into_iter().zip(children).map(gathered).collect()
+    out.into_par_iter().zip(children).map(gathered).collect()
+}
+
+/// Entries handed down together by one call of [`hand_down`]: a group of the lower levels
+/// (about 2,000 entries) is one run, as before runs existed.
+const HAND_DOWN_RUN: usize = 4096;
+
+/// Where [`hand_down`] sends a sample: the child of each output triangle, the output triangle
+/// of each kept corner's position, and the search for the rest.
+struct Destinations<'a> {
+    output_child: &'a [u32],
+    at_corner: &'a rustc_hash::FxHashMap<u32, u32>,
+    search: &'a (dyn Fn([f32; 3], usize) -> usize + Sync),
+}
+
+/// [`assign_owned`] for a run of entries `owned`, whose `found` slots start the given slice:
+/// per child, its entries of the run, in order.
+fn hand_down(mesh: &WeldedMesh, owned: &[Owned], found: &[u32], to: &Destinations, children: usize) -> Vec<Vec<Owned>> {
+    let point = |v: u32| mesh.positions[v as usize];
+    let id = |v: u32| mesh.position_ids[v as usize];
+    let mut out = vec![Vec::new(); children];
+    let mut bits = vec![0u8; children];
+    let mut hint = usize::MAX;
+    for (i, o) in owned.iter().enumerate() {
+        let f = |b: usize| found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
+        let (t, mask) = match o.samples {
+            Samples::Ball(ball) => {
+                hint = match f(6) {
+                    NOT_FOUND => (to.search)(ball.center, hint),
+                    f => f as usize,
+                };
+                out[to.output_child[hint] as usize].push(*o);
+                continue;
+            }
+            Samples::Triangle(t, mask) => (t, mask),
+        };
+        let (mut touched, mut count) = ([0usize; 7], 0);
+        for b in set_bits(mask) {
+            // Looked up only for an unmeasured corner (most samples were measured).
+            let kept = || if b < 3 { to.at_corner.get(&id(t[b])) } else { None };
+            let nearest = match f(b) {
+                NOT_FOUND if let Some(&k) = kept() => k as usize,
+                NOT_FOUND => (to.search)(sample_point(&t.map(point), b), hint),
+                f => f as usize,
+            };
+            hint = nearest;
+            let c = to.output_child[nearest] as usize;
+            if bits[c] == 0 {
+                touched[count] = c;
+                count += 1;
+            }
+            bits[c] |= 1 << b;
+        }
+        for &c in &touched[..count] {
+            out[c].push(Owned::triangle(o.code, t, std::mem::take(&mut bits[c])));
+        }
+    }
+    out
 }
 
 /// Per triangle of `output`, the index of the child cluster (of `children`, its split) that

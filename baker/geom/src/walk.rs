@@ -11,7 +11,7 @@
 //! No library walks a general triangle soup in 3-D by closest-point regions (triangulation
 //! crates walk planar Delaunay meshes), so this is written here.
 
-use crate::bvh::{point_triangle_distance2, Real, Triangle};
+use crate::bvh::{point_triangle_distance2, Bvh, Real, Triangle};
 use crate::edges::edge_key;
 use rayon::prelude::*;
 
@@ -70,6 +70,59 @@ impl Neighbours {
             }
         }
         best
+    }
+}
+
+/// Triangles with their hierarchy and neighbours: nearest-triangle queries that walk from a
+/// hint first (see the module doc).
+pub struct Surface<T> {
+    /// The triangles.
+    pub tris: Vec<Triangle<T>>,
+    bvh: Bvh<T>,
+    neighbours: Neighbours,
+}
+
+impl<T: Real> Surface<T> {
+    /// The surface of `tris`, whose corners have the position ids `corners` (three per
+    /// triangle; see [`Neighbours::new`]).
+    pub fn new(tris: Vec<Triangle<T>>, corners: &[u32]) -> Surface<T> {
+        Surface { bvh: Bvh::new(&tris), neighbours: Neighbours::new(corners), tris }
+    }
+
+    /// The hierarchy, for queries that do not walk.
+    pub fn bvh(&self) -> &Bvh<T> {
+        &self.bvh
+    }
+
+    /// [`Bvh::nearest_squared`] after a walk of at most `steps` from `hint` (a triangle index,
+    /// or `usize::MAX` for none): a triangle within `enough2` the walk reaches, else the
+    /// hierarchy's answer (the nearest triangle where it is farther than `enough2`).
+    pub fn nearest_squared(&self, p: [T; 3], enough2: T, hint: usize, steps: usize) -> (T, usize) {
+        match self.walk(p, enough2, hint, steps) {
+            Ok(found) => found,
+            Err(hint) => self.bvh.nearest_squared(&self.tris, p, enough2, hint),
+        }
+    }
+
+    /// Like [`Surface::nearest_squared`], with [`Bvh::within_squared`] after the walk.
+    pub fn within_squared(&self, p: [T; 3], enough2: T, hint: usize, steps: usize) -> (T, usize) {
+        match self.walk(p, enough2, hint, steps) {
+            Ok(found) => found,
+            Err(hint) => self.bvh.within_squared(&self.tris, p, enough2, hint),
+        }
+    }
+
+    /// The walk's triangle where it is within `enough2`, else the hint for the hierarchy.
+    fn walk(&self, p: [T; 3], enough2: T, hint: usize, steps: usize) -> Result<(T, usize), usize> {
+        if hint >= self.tris.len() {
+            return Err(hint);
+        }
+        let (d2, t) = self.neighbours.walk(&self.tris, p, enough2, hint, steps);
+        if d2 <= enough2 {
+            Ok((d2, t))
+        } else {
+            Err(t)
+        }
     }
 }
 
@@ -163,5 +216,33 @@ mod tests {
         // Outside the grid: the walk stops at the border, at a triangle touching it.
         let (d2, _) = n.walk(&tris, [-3.0, 4.5, 0.0], 0.0, 0, 64);
         assert!((d2 - 9.0).abs() < 1e-9, "{d2}");
+    }
+
+    #[test]
+    fn surface_queries_answer_as_the_hierarchy_does() {
+        // A bumpy grid: points above and beside it, hints near and far.
+        let (mut tris, corners) = grid(12);
+        for t in &mut tris {
+            for v in t.iter_mut() {
+                v[2] = (v[0] * 0.7).sin() * (v[1] * 0.4).cos();
+            }
+        }
+        let surface = Surface::new(tris.clone(), &corners);
+        let mut state = 7u64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f64 / (1u64 << 24) as f64
+        };
+        for _ in 0..300 {
+            let p = [next() * 16.0 - 2.0, next() * 16.0 - 2.0, next() * 4.0 - 2.0];
+            let exact = tris.iter().map(|t| point_triangle_distance2(p, t)).fold(f64::INFINITY, f64::min);
+            let hint = (next() * tris.len() as f64) as usize;
+            for query in [Surface::nearest_squared, Surface::within_squared] {
+                let (d2, t) = query(&surface, p, 0.0, hint, 8);
+                assert!(d2 == exact && point_triangle_distance2(p, &tris[t]) == d2, "{d2} {exact}");
+                let (d2, t) = query(&surface, p, exact * 2.0 + 0.01, hint, 8);
+                assert!(d2 <= exact * 2.0 + 0.01 && point_triangle_distance2(p, &tris[t]) == d2);
+            }
+        }
     }
 }
