@@ -433,25 +433,38 @@ pub(crate) fn source_keys<'a>(sources: impl IntoIterator<Item = &'a Quantized>) 
 }
 
 /// One source page's vertices by key: every (key, number in the page) pair, sorted, so that
-/// the numbers of equal vertices are one run in ascending order. Made once per source page (a
-/// page is the source of several others) rather than once per page that reads it. A sorted
-/// array rather than a hash map of lists: one allocation, and the nearest number is a binary
-/// search in the run.
-pub(crate) struct SortedKeys(Vec<(VertexKey, u32)>);
+/// the numbers of equal vertices are one run in ascending order, and where each key's run
+/// starts. Made once per source page (a page is the source of several others) rather than once
+/// per page that reads it; a page looks up each of its new vertices in every source, so a
+/// lookup is a hash probe, not a binary search (which cost several cache misses each).
+pub(crate) struct SortedKeys {
+    entries: Vec<(VertexKey, u32)>,
+    start: rustc_hash::FxHashMap<VertexKey, u32>,
+}
 
 impl SortedKeys {
     /// The index of one source page's vertex `keys` (in its own numbering).
     pub(crate) fn new(keys: &[VertexKey]) -> SortedKeys {
         let mut entries: Vec<(VertexKey, u32)> = keys.iter().enumerate().map(|(u, &k)| (k, u as u32)).collect();
         entries.sort_unstable();
-        SortedKeys(entries)
+        let mut start = rustc_hash::FxHashMap::default();
+        start.reserve(entries.len());
+        for (i, (k, _)) in entries.iter().enumerate().rev() {
+            start.insert(*k, i as u32);
+        }
+        SortedKeys { entries, start }
+    }
+
+    /// How many vertices it has.
+    fn len(&self) -> u32 {
+        self.entries.len() as u32
     }
 
     /// The numbers of the vertices equal to `k`, ascending.
     fn run(&self, k: &VertexKey) -> impl DoubleEndedIterator<Item = u32> + Clone + '_ {
-        let start = self.0.partition_point(|(e, _)| e < k);
-        let run = &self.0[start..];
-        run[..run.partition_point(|(e, _)| e == k)].iter().map(|&(_, u)| u)
+        let first = self.start.get(k).map_or(self.entries.len(), |&i| i as usize);
+        let run = &self.entries[first..];
+        run[..run.iter().take_while(|(e, _)| e == k).count()].iter().map(|&(_, u)| u)
     }
 }
 
@@ -470,7 +483,7 @@ impl<'a> SourceIndex<'a> {
             .into_iter()
             .map(|s| {
                 let at = first;
-                first += s.0.len() as u32;
+                first += s.len();
                 (s, at)
             })
             .collect();
