@@ -738,14 +738,17 @@ fn duties(
         // Level-0 samples against an upper level: they share hardly an edge or a triangle, so
         // only the corners the output kept are left out (a shared edge's midpoint measures 0
         // at once), and the level-0 edges need no sort.
-        let mut kept = vec![false; mesh.position_count];
+        // The kept positions as bits: a flag byte per position of the mesh was, per group, a
+        // fresh allocation of the whole mesh's size, zeroed page by page by the system.
+        let mut kept = vec![0u64; mesh.position_count.div_ceil(64)];
         for &v in output {
-            kept[id(v) as usize] = true;
+            kept[id(v) as usize / 64] |= 1 << (id(v) % 64);
         }
+        let is_kept = |v: u32| kept[id(v) as usize / 64] >> (id(v) % 64) & 1 != 0;
         let input_duty = input
             .par_chunks_exact(3)
             .with_min_len(4096)
-            .map(|t| (0..3).filter(|&k| kept[id(t[k]) as usize]).fold(0x7fu8, |d, k| d & !(1 << k)))
+            .map(|t| (0..3).filter(|&k| is_kept(t[k])).fold(0x7fu8, |d, k| d & !(1 << k)))
             .collect();
         let mut output_duty = vec![64u8; output.len() / 3];
         mark(&edges(output), &[], &mut output_duty, |_| 0.0, edge);
