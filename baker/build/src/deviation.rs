@@ -14,7 +14,6 @@
 //! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
 //! with their worst spots locked ([`simplify_measured`]).
 
-use crate::partition::morton_codes;
 use crate::samples::{sample_point, set_bits, Owned, Samples, CENTROID, NOT_FOUND};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Locks, Simplified};
@@ -198,18 +197,11 @@ pub struct Original {
 const WALK_STEPS: usize = 8;
 
 impl Original {
-    /// The level-0 triangles of `mesh` (its `indices`).
-    pub fn new(mesh: &WeldedMesh) -> Original {
+    /// The level-0 triangles of `mesh` (its `indices`), in `order` (the mesh's
+    /// [`crate::partition::triangle_order`], which the level-0 clusters share).
+    pub fn new(mesh: &WeldedMesh, order: &[u32]) -> Original {
         let p = |v: u32| mesh.positions[v as usize];
-        let centroids: Vec<[f32; 3]> = mesh
-            .indices
-            .par_chunks_exact(3)
-            .map(|t| [0, 1, 2].map(|k| (p(t[0])[k] + p(t[1])[k] + p(t[2])[k]) * (1.0 / 3.0)))
-            .collect();
-        let mut order: Vec<(u32, u32)> =
-            morton_codes(&centroids).into_iter().enumerate().map(|(t, code)| (code, t as u32)).collect();
-        order.par_sort_unstable();
-        let source: Vec<u32> = order.into_iter().map(|(_, t)| t).collect();
+        let source = order.to_vec();
         let corners = |t: u32| &mesh.indices[t as usize * 3..t as usize * 3 + 3];
         let tris: Vec<Triangle<f32>> = source
             .par_iter()
@@ -805,7 +797,7 @@ mod tests {
         let corners: Vec<u32> = balls.iter().flat_map(|o| o.corners()).collect();
         let errors = vec![0.0; balls.len()];
         let sides = Sides { input: &corners, triangle_errors: &errors, owned: Some(&balls), small: 0.0 };
-        let original = Original::new(&w);
+        let original = Original::new(&w, &crate::partition::triangle_order(&w));
         // The peak is `h` above the flat output; the ball is measured at its centre only.
         let (worst, _, found) = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original));
         assert!(worst >= h && worst <= h + 2.0 * ball.radius as f64, "{worst} vs peak {h}, {ball:?}");

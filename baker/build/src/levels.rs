@@ -11,7 +11,7 @@ use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopClust
 use crate::deviation::{part_sizes, simplify_measured, Original, Reference};
 use crate::error::BakeError;
 use crate::open;
-use crate::partition::{cluster_graph, partition};
+use crate::partition::{cluster_graph, partition, triangle_order};
 use crate::progress::Progress;
 use crate::samples::{assign_owned, merge_owned, sort_owned, Owned};
 use crate::settings::{BakeSettings, ErrorBound};
@@ -56,9 +56,10 @@ struct Child {
 }
 
 /// Level-0 clusters of a welded mesh, with their own bounds; the edges of `open` (sorted
-/// position-id keys: the original's odd edges) are marked once each.
-pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64]) -> Vec<BuiltCluster> {
-    let clusters = level0_clusters(mesh, settings);
+/// position-id keys: the original's odd edges) are marked once each. `order` is the mesh's
+/// [`triangle_order`].
+pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64], order: &[u32]) -> Vec<BuiltCluster> {
+    let clusters = level0_clusters(mesh, settings, order);
     // Three serial passes over every triangle, independent of each other: side by side.
     let (marks, (samples, codes)) = rayon::join(
         || open::mark(mesh, &clusters, open),
@@ -149,7 +150,7 @@ impl<'a> Builder<'a> {
     }
 
     /// [`Builder::new`] with the whole level-0 surface already built where the caller has it
-    /// (`Original::new(mesh)`, made while the level-0 clusters were).
+    /// (`Original::new`, made while the level-0 clusters were).
     pub fn with_original(
         mesh: &'a WeldedMesh,
         settings: &'a BakeSettings,
@@ -161,7 +162,10 @@ impl<'a> Builder<'a> {
         let measured = settings.error_bound == ErrorBound::Measured;
         // Independent passes over the whole mesh, two of them serial: side by side.
         let (original, (always_locked, part_size)) = rayon::join(
-            || (measured && from_level0).then(|| original.unwrap_or_else(|| Original::new(mesh))),
+            || {
+                (measured && from_level0)
+                    .then(|| original.unwrap_or_else(|| Original::new(mesh, &triangle_order(mesh))))
+            },
             || rayon::join(|| always_locked(mesh, &clusters), || if measured { part_sizes(mesh) } else { Vec::new() }),
         );
         let pending = (0..clusters.len()).collect();
@@ -421,29 +425,15 @@ impl<'a> Builder<'a> {
 /// Triangles per chunk of the level-0 split: chunks are clustered in parallel.
 const LEVEL0_CHUNK: usize = 128 * 512;
 
-/// Level-0 clusters: triangles sorted by the Morton code of their centroid and cut into chunks
+/// Level-0 clusters: triangles in `order` (Morton order of their centroids, [`triangle_order`]) cut into chunks
 /// of [`LEVEL0_CHUNK`] triangles, each split by the meshlet builder on its own thread (one call
 /// on the whole mesh would run on one core). Only each chunk's last cluster can be partial.
-fn level0_clusters(mesh: &WeldedMesh, settings: &BakeSettings) -> Vec<Vec<u32>> {
-    let centroids: Vec<[f32; 3]> = mesh
-        .indices
-        .par_chunks_exact(3)
-        .map(|t| {
-            let p = t.iter().map(|&v| mesh.positions[v as usize]);
-            p.fold([0.0; 3], |a, b| [a[0] + b[0] / 3.0, a[1] + b[1] / 3.0, a[2] + b[2] / 3.0])
-        })
-        .collect();
-    let codes = crate::partition::morton_codes(&centroids);
-    drop(centroids);
-    let mut order: Vec<(u32, u32)> = codes.into_iter().enumerate().map(|(t, code)| (code, t as u32)).collect();
-    order.par_sort_unstable();
+fn level0_clusters(mesh: &WeldedMesh, settings: &BakeSettings, order: &[u32]) -> Vec<Vec<u32>> {
     order
         .par_chunks(LEVEL0_CHUNK)
         .flat_map_iter(|chunk| {
-            let indices: Vec<u32> = chunk
-                .iter()
-                .flat_map(|&(_, t)| mesh.indices[t as usize * 3..t as usize * 3 + 3].iter().copied())
-                .collect();
+            let indices: Vec<u32> =
+                chunk.iter().flat_map(|&t| mesh.indices[t as usize * 3..t as usize * 3 + 3].iter().copied()).collect();
             split(&indices, &mesh.positions, settings.max_triangles as usize, settings)
         })
         .collect()

@@ -7,6 +7,7 @@
 //! target part weights (Pettett §3.1.4's "exact partitioning"): a set of `n` clusters is cut in
 //! two parts sized for `⌊k/2⌋` and `⌈k/2⌉` groups, `k = round(n / target)`.
 
+use crate::weld::WeldedMesh;
 use rayon::prelude::*;
 
 /// Locality links: each cluster is linked to this many successors in Morton order that
@@ -110,6 +111,25 @@ fn components(n: usize, pairs: &[(u32, u32)]) -> Vec<u32> {
         }
     }
     (0..n as u32).map(|i| find(&mut parent, i)).collect()
+}
+
+/// The triangles of `mesh` (indices into its triangle list) in Morton order of their
+/// centroids, equal codes in index order: the order of the level-0 clusters and of the whole
+/// surface the errors are measured against.
+pub fn triangle_order(mesh: &WeldedMesh) -> Vec<u32> {
+    let centroids: Vec<[f32; 3]> = mesh
+        .indices
+        .par_chunks_exact(3)
+        .map(|t| {
+            let p = t.iter().map(|&v| mesh.positions[v as usize]);
+            p.fold([0.0; 3], |a, b| [a[0] + b[0] / 3.0, a[1] + b[1] / 3.0, a[2] + b[2] / 3.0])
+        })
+        .collect();
+    let codes = morton_codes(&centroids);
+    drop(centroids);
+    let mut order: Vec<(u32, u32)> = codes.into_iter().enumerate().map(|(t, code)| (code, t as u32)).collect();
+    order.par_sort_unstable();
+    order.into_iter().map(|(_, t)| t).collect()
 }
 
 /// 30-bit Morton codes of points, quantized over their bounding box.

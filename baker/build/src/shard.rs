@@ -31,6 +31,7 @@ use crate::dag::{BuildStats, BuiltCluster, BuiltDag, Cell, Collected, DagOutput,
 use crate::error::BakeError;
 use crate::levels::{level0, Builder};
 use crate::open;
+use crate::partition::triangle_order;
 use crate::progress::Progress;
 use crate::settings::BakeSettings;
 use crate::source::TriangleSource;
@@ -372,7 +373,8 @@ impl ShardContext<'_> {
                 global_open.contains(&grid_edge(q(a), q(b)))
             })
             .collect();
-        let cell = self.levels(&welded, level0(&welded, self.settings, &open), 0, false, output)?;
+        let cell =
+            self.levels(&welded, level0(&welded, self.settings, &open, &triangle_order(&welded)), 0, false, output)?;
         Ok(Cell {
             triangles,
             welded_vertices: welded.positions.len() as u64,

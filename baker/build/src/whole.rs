@@ -5,6 +5,7 @@ use crate::dag::{BuildStats, BuiltDag, Collected, DagOutput, Frame, StageClock};
 use crate::deviation::Original;
 use crate::error::BakeError;
 use crate::levels::{level0, Builder};
+use crate::partition::triangle_order;
 use crate::progress::Progress;
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::weld::weld;
@@ -30,10 +31,12 @@ pub fn build_whole<O: DagOutput>(
     clock.lap(&mut stats, "weld");
     // The whole level-0 surface that errors are measured against, made beside the clusters.
     let measured = settings.error_bound == ErrorBound::Measured;
+    let order = triangle_order(&welded);
     let (original, clusters) = rayon::join(
-        || measured.then(|| Original::new(&welded)),
-        || level0(&welded, settings, &crate::open::odd_edges(&welded, &welded.indices)),
+        || measured.then(|| Original::new(&welded, &order)),
+        || level0(&welded, settings, &crate::open::odd_edges(&welded, &welded.indices), &order),
     );
+    drop(order);
     let mut builder = Builder::with_original(&welded, settings, clusters, 0, original);
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
