@@ -275,33 +275,29 @@ fn measure(
     // returned error of it (see `assign_owned`); NOT_FOUND where the sample was not measured.
     let mut found = vec![NOT_FOUND; input.len() / 3 * 7];
     let id = |v: u32| mesh.position_ids[v as usize];
-    let balls = || sides.owned.into_iter().flatten().filter_map(Owned::ball);
-    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-    let corners = input.iter().map(|&v| (mesh.positions[v as usize], 0.0));
-    for (p, r) in corners.chain(balls().map(|b| (b.center, b.radius))) {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k] - r);
-            hi[k] = hi[k].max(p[k] + r);
-        }
-    }
+    // The input's entries in object coordinates first (one pass over the mesh's positions, in
+    // parallel: at the top levels the input is every level-0 triangle, in one group), then its
+    // bounds, then the entries around the bounds' centre.
+    let absolute = |v: u32| mesh.positions[v as usize];
+    // A ball's entry is its centre three times (measured at its centroid, the centre).
+    let entry = |o: &Owned| match o.samples {
+        Samples::Ball(b) => [b.center; 3],
+        Samples::Triangle(t, _) => t.map(absolute),
+    };
+    let mut input_tris: Vec<Triangle<f32>> = match sides.owned {
+        Some(owned) => owned.par_iter().map(entry).collect(),
+        None => input.par_chunks_exact(3).map(|t| [absolute(t[0]), absolute(t[1]), absolute(t[2])]).collect(),
+    };
+    let (lo, hi) = input_bounds(&input_tris, sides.owned, absolute);
     let center = [0, 1, 2].map(|k| lo[k] * 0.5 + hi[k] * 0.5);
     let reach = (0..3).map(|k| (hi[k] - center[k]).max(center[k] - lo[k])).fold(0.0f32, f32::max);
     // Rounding of the f32 subtraction, products and sums (a few dozen ulps of the group's reach).
     let slack = 64.0 * f32::EPSILON as f64 * reach as f64;
     let to_local = |p: [f32; 3]| [p[0] - center[0], p[1] - center[1], p[2] - center[2]];
+    input_tris.par_iter_mut().with_min_len(4096).for_each(|t| *t = t.map(to_local));
     let local = |v: u32| to_local(mesh.positions[v as usize]);
-    // In parallel: at the top levels the input is every level-0 triangle, in one group.
     let triangles = |indices: &[u32]| -> Vec<Triangle<f32>> {
         indices.par_chunks_exact(3).map(|t| [local(t[0]), local(t[1]), local(t[2])]).collect()
-    };
-    // A ball's entry is its centre three times (measured at its centroid, the centre).
-    let entry = |o: &Owned| match o.samples {
-        Samples::Ball(b) => [to_local(b.center); 3],
-        Samples::Triangle(t, _) => t.map(local),
-    };
-    let input_tris = match sides.owned {
-        Some(owned) => owned.par_iter().map(entry).collect(),
-        None => triangles(input),
     };
     let output_tris = triangles(output);
     let (mut input_duty, output_duty) = duties(mesh, input, output, triangle_errors, sides.owned.is_some());
@@ -412,6 +408,22 @@ fn measure(
     (worst, hot, found)
 }
 
+/// The bounds of a measurement's input: its entries `tris` (object coordinates), and with
+/// `owned` its balls' spheres and each ball's vertex [`Ball::at`](crate::samples::Ball).
+fn input_bounds(tris: &[Triangle<f32>], owned: Option<&[Owned]>, absolute: impl Fn(u32) -> [f32; 3] + Sync) -> Box3 {
+    let empty = || ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    let union = |(alo, ahi): Box3, (blo, bhi): Box3| {
+        ([0, 1, 2].map(|k| alo[k].min(blo[k])), [0, 1, 2].map(|k| ahi[k].max(bhi[k])))
+    };
+    let of_points = |points: &[[f32; 3]], r: f32| {
+        points.iter().fold(empty(), |b, p| union(b, (p.map(|x| x - r), p.map(|x| x + r))))
+    };
+    let corners = tris.par_iter().with_min_len(4096).map(|t| of_points(t, 0.0)).reduce(empty, union);
+    let balls = owned.into_iter().flatten().filter_map(Owned::ball).collect::<Vec<_>>();
+    let spheres = balls.par_iter().map(|b| union(of_points(&[b.center], b.radius), of_points(&[absolute(b.at)], 0.0)));
+    union(corners, spheres.reduce(empty, union))
+}
+
 /// Input triangles measured together in one parallel run of `InputSide::measure`. Fixed, so
 /// that the result does not depend on the thread count.
 const RUN_TRIANGLES: usize = 4096;
@@ -511,7 +523,9 @@ impl InputSide<'_> {
 /// next level's errors tight). Patches are runs of `input`
 /// (in Morton order, see [`Owned`]), halved until they settle or hold one triangle; what is left is
 /// measured sample by sample. At upper levels, whose errors dwarf the level-0 triangles, this
-/// replaces most of the three queries per level-0 triangle by one per patch.
+/// replaces most of the three queries per level-0 triangle by one per patch. At the lower
+/// levels, where hardly an entry is small enough to settle (see [`FEW_SMALL`]), it does
+/// nothing: building and walking the pyramid there cost more than the queries it spared.
 fn accept_patches(
     (input, reach): (&[Triangle<f32>], &[f32]),
     (duty, found): (&mut [u8], &mut [u32]),
@@ -522,7 +536,15 @@ fn accept_patches(
     if input.is_empty() {
         return;
     }
-    let boxes = BoxPyramid::new((input, reach), duty, triangle_errors);
+    let leaves = BoxPyramid::leaves((input, reach), duty);
+    // A patch settles only if each of its entries' boxes is as small as it must be, for the
+    // smallest member error: count those (an upper bound on what patches can settle).
+    let (half, measured) = (0.5 * bound(0.0), duty.iter().filter(|&&d| d != 0).count());
+    let small = leaves.par_iter().with_min_len(4096).filter(|b| half_diagonal(b).is_some_and(|r| r < half)).count();
+    if small * FEW_SMALL < measured {
+        return;
+    }
+    let boxes = BoxPyramid::new(leaves, triangle_errors);
     let patches = Patches { boxes: &boxes, bvh, output, bound: &bound };
     // The patches above runs of 2^PATCH_RUN entries first, then each such run left unsettled
     // on its own, side by side (a group's runs are many only at the top levels, where one group
@@ -543,6 +565,12 @@ fn accept_patches(
 /// Entries of a run whose patches [`accept_patches`] tries on its own: 2^12, as
 /// `RUN_TRIANGLES`.
 const PATCH_RUN: usize = 12;
+
+/// [`accept_patches`] tries no patch where fewer than one in this many of the entries to
+/// measure could settle at all: it would spare at most that share of the queries. Measured on
+/// the Stanford dragon (one thread): its first five levels settle 1-6 % of their entries by
+/// patches, and skipping them there saves 2-3 % of the bake; see docs/BENCHMARKS.md.
+const FEW_SMALL: usize = 8;
 
 /// What [`accept_patches`] settles patches with.
 struct Patches<'a, F> {
@@ -567,10 +595,21 @@ impl<F: Fn(f32) -> f32> Patches<'_, F> {
         let boxes = self.boxes;
         let mut hint = usize::MAX;
         let mut stack = vec![root];
+        // Most nodes share their error (level-0 entries have none): the bound is computed anew
+        // only where it changes.
+        let (mut error, mut limit) = (f32::NAN, 0.0);
         while let Some((level, k)) = stack.pop() {
-            let Some((center, radius)) = boxes.sphere(level, k) else { continue };
-            let limit = (self.bound)(boxes.errors[level][k]);
+            let b = &boxes.levels[level][k];
+            let Some(r2) = half_diagonal2(b) else { continue };
+            if boxes.errors[level][k].to_bits() != error.to_bits() {
+                error = boxes.errors[level][k];
+                limit = (self.bound)(error);
+            }
+            // Far too large to settle: no root to take (the upper levels of a large group).
+            let too_large = r2 > 0.25 * limit * limit * (1.0 + 1e-4);
+            let radius = if too_large { f32::INFINITY } else { padded(r2) };
             if radius < 0.5 * limit {
+                let center = centre(b);
                 let enough = (limit - radius) * (limit - radius);
                 let (d2, nearest) = self.bvh.nearest_squared(self.output, center, enough, hint);
                 hint = nearest;
@@ -599,21 +638,17 @@ impl<F: Fn(f32) -> f32> Patches<'_, F> {
 /// pairs of level j (runs of 2^j triangles), up to one box for all. Built in linear time, so
 /// that trying patches costs little where none settles.
 struct BoxPyramid {
-    levels: Vec<Vec<([f32; 3], [f32; 3])>>,
+    levels: Vec<Vec<Box3>>,
     /// The same pyramid of the runs' largest triangle errors (a patch's bound needs it: one
     /// lookup, not a pass over the run).
     errors: Vec<Vec<f32>>,
 }
 
 impl BoxPyramid {
-    /// The pyramid over `triangles` grown by their `reach` (see `InputSide::reach`), with their
-    /// `errors`; those whose `duty` is 0 have nothing to measure and get an empty box.
-    fn new((triangles, reach): (&[Triangle<f32>], &[f32]), duty: &[u8], errors: &[f32]) -> BoxPyramid {
-        // Comparisons rather than `min`/`max` (their NaN rules cost instructions on every
-        // triangle): on finite values the same bounds, up to the sign of a zero, which neither
-        // a centre's query nor a radius sees.
-        let (lesser, greater) =
-            (|a: f32, b: f32| if b < a { b } else { a }, |a: f32, b: f32| if b > a { b } else { a });
+    /// The pyramid's level 0: the boxes of `triangles` grown by their `reach` (see
+    /// `InputSide::reach`); those whose `duty` is 0 have nothing to measure and get an empty
+    /// box.
+    fn leaves((triangles, reach): (&[Triangle<f32>], &[f32]), duty: &[u8]) -> Vec<Box3> {
         let one = |((t, &d), &r): ((&Triangle<f32>, &u8), &f32)| {
             if d == 0 {
                 return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
@@ -622,10 +657,14 @@ impl BoxPyramid {
             let hi = [0, 1, 2].map(|k| greater(greater(t[0][k], t[1][k]), t[2][k]) + r);
             (lo, hi)
         };
-        let mut levels =
-            vec![triangles.par_iter().zip(duty).zip(reach).with_min_len(4096).map(one).collect::<Vec<_>>()];
+        triangles.par_iter().zip(duty).zip(reach).with_min_len(4096).map(one).collect()
+    }
+
+    /// The pyramid over `leaves` (see [`BoxPyramid::leaves`]), with their entries' `errors`.
+    fn new(leaves: Vec<Box3>, errors: &[f32]) -> BoxPyramid {
+        let mut levels = vec![leaves];
         while levels[levels.len() - 1].len() > 1 {
-            let union = |p: &[([f32; 3], [f32; 3])]| {
+            let union = |p: &[Box3]| {
                 let (mut lo, mut hi) = p[0];
                 for b in &p[1..] {
                     for k in 0..3 {
@@ -645,18 +684,56 @@ impl BoxPyramid {
         }
         BoxPyramid { levels, errors: error_levels }
     }
+}
 
-    /// The centre of box `k` of `level` and its half diagonal, padded for rounding (every
-    /// point of its triangles is within that of the centre); `None` for an empty box.
-    fn sphere(&self, level: usize, k: usize) -> Option<([f32; 3], f32)> {
-        let (lo, hi) = self.levels[level][k];
-        if lo[0] > hi[0] {
-            return None;
-        }
-        let c = [0, 1, 2].map(|k| lo[k] * 0.5 + hi[k] * 0.5);
-        let r2: f32 = (0..3).map(|k| (hi[k] - c[k]).max(c[k] - lo[k])).map(|d| d * d).sum();
-        Some((c, r2.sqrt() * (1.0 + 1e-5)))
+/// An axis-aligned box: lower and upper corner.
+type Box3 = ([f32; 3], [f32; 3]);
+
+/// Comparisons rather than `min`/`max` (their NaN rules cost instructions on every triangle):
+/// on finite values the same bounds, up to the sign of a zero, which neither a centre's query
+/// nor a radius sees.
+fn lesser(a: f32, b: f32) -> f32 {
+    if b < a {
+        b
+    } else {
+        a
     }
+}
+
+/// See [`lesser`].
+fn greater(a: f32, b: f32) -> f32 {
+    if b > a {
+        b
+    } else {
+        a
+    }
+}
+
+/// The centre of box `b`.
+fn centre((lo, hi): &Box3) -> [f32; 3] {
+    [0, 1, 2].map(|k| lo[k] * 0.5 + hi[k] * 0.5)
+}
+
+/// Half the diagonal of box `b`, padded for rounding (every point in it is within that of its
+/// [`centre`]); `None` for an empty box.
+fn half_diagonal(b: &Box3) -> Option<f32> {
+    half_diagonal2(b).map(padded)
+}
+
+/// The square of half the diagonal of box `b` (from its [`centre`]), unpadded; `None` for an
+/// empty box.
+fn half_diagonal2(b: &Box3) -> Option<f32> {
+    let (lo, hi) = b;
+    if lo[0] > hi[0] {
+        return None;
+    }
+    let c = centre(b);
+    Some((0..3).map(|k| (hi[k] - c[k]).max(c[k] - lo[k])).map(|d| d * d).sum())
+}
+
+/// [`half_diagonal`] from its square.
+fn padded(r2: f32) -> f32 {
+    r2.sqrt() * (1.0 + 1e-5)
 }
 
 /// Which samples each triangle of `input` and of `output` measures, as bits: corner k (bit k;

@@ -308,6 +308,12 @@ pub(crate) fn gather(mesh: &WeldedMesh, list: Vec<Owned>, limit: f64, part_size:
     // The run: its first entry, how many, enclosing sphere, vertex of the largest part.
     let mut run: Option<(Owned, usize, Sphere, u32)> = None;
     for o in list {
+        if too_large(mesh, &o, limit) {
+            // It ends the run and stays as it is (what joining it would come to, for less).
+            out.extend(run.take().map(|(first, count, s, a)| finish(first, count, s, a, limit)));
+            out.push(o);
+            continue;
+        }
         let (sphere, at) = enclosing(mesh, &o);
         if let Some((first, count, s, a)) = &mut run {
             let joined = join(*s, sphere);
@@ -343,6 +349,18 @@ fn finish(first: Owned, count: usize, (center, radius): Sphere, at: u32, limit: 
         radius = radius.next_up();
     }
     Owned { code: first.code, samples: Samples::Ball(Ball { center: rounded, radius, at }) }
+}
+
+/// Whether a triangle entry fits in no sphere of radius `limit`: half its longest edge (a
+/// bound from below on any enclosing sphere's radius, and on [`enclosing`]'s) exceeds it, with
+/// a margin for rounding. Where the errors are still small beside the level-0 triangles (the
+/// top levels of a fine scan), most entries are so, and this spares their spheres.
+fn too_large(mesh: &WeldedMesh, o: &Owned, limit: f64) -> bool {
+    let Samples::Triangle(t, _) = o.samples else { return false };
+    let p = t.map(|v| mesh.positions[v as usize].map(f64::from));
+    let edge2 = |a: [f64; 3], b: [f64; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>();
+    let longest2 = edge2(p[0], p[1]).max(edge2(p[1], p[2])).max(edge2(p[2], p[0]));
+    longest2 > 4.0 * limit * limit * (1.0 + 1e-9)
 }
 
 /// A sphere holding every point an entry stands for (a triangle: centroid and the farthest
