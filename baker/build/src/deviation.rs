@@ -95,13 +95,16 @@ pub fn simplify_measured(
     let (members, triangles, errors) = (reference.members_error, &reference.triangles[..], &reference.errors);
     let small = SMALL_TRIANGLE * members as f64;
     let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.owned, small };
-    let error_of = |s: &Simplified, hot_above: Option<f64>| {
-        let (total, hot, found) =
-            measure(mesh, &sides, &s.indices, part_size, s.error as f64, hot_above, reference.original);
-        (stored(total, s.error).max(members), hot, found)
+    // Samples farther than the outlier ratio × the estimate are kept with their distances:
+    // the spots that set an outlier's error are among them (see `Far`).
+    let error_of = |s: &Simplified| {
+        let record = Some(OUTLIER_RATIO * s.error as f64);
+        let (total, far, found) =
+            measure(mesh, &sides, &s.indices, part_size, s.error as f64, record, reference.original);
+        (stored(total, s.error).max(members), far, found)
     };
     let mut best = simplify_group(mesh, input, masks, locks, settings, reference.lenient)?;
-    let (mut error, _, mut found) = error_of(&best, None);
+    let (mut error, mut far, mut found) = error_of(&best);
     let mut extra: Vec<u32> = Vec::new();
     for _ in 0..OUTLIER_RETRIES {
         let (estimate, added) = (best.error as f64, error as f64 - members as f64);
@@ -110,9 +113,8 @@ pub fn simplify_measured(
         }
         // Lock around the samples farther than half the excess (and than the outlier ratio).
         let hot_above = (added * 0.5 / SAMPLING_MARGIN).max(OUTLIER_RATIO * estimate);
-        let (_, hot, _) = error_of(&best, Some(hot_above));
         let before = extra.len();
-        extra.extend(hot);
+        extra.extend(far.hot(mesh, triangles, hot_above));
         extra.sort_unstable();
         extra.dedup();
         if extra.len() == before {
@@ -122,11 +124,11 @@ pub fn simplify_measured(
         let lock = |v: u32| (locks.vertex)(v) || extra.binary_search(&id(v)).is_ok();
         let retry_locks = Locks { vertex: &lock, chord: locks.chord };
         let Some(retry) = simplify_group(mesh, input, masks, &retry_locks, settings, reference.lenient) else { break };
-        let (e, _, f) = error_of(&retry, None);
+        let (e, fa, f) = error_of(&retry);
         if e >= error {
             break;
         }
-        (best, error, found) = (retry, e, f);
+        (best, error, far, found) = (retry, e, fa, f);
     }
     Some(Measured { simplified: best, error, found })
 }
@@ -244,9 +246,7 @@ fn stored(total: f64, simplifier_error: f32) -> f32 {
 /// keeps one member's large error from adding to every other member's distance.
 /// `triangle_errors` gives each input triangle's member error. A point of the input farther
 /// from the output than its part's size counts as its part's size (the part vanished). With
-/// `hot_above`, also returns the position ids around the samples farther than it (distance
-/// alone): the corners of the input triangles they lie on or are nearest to, and those
-/// triangles' neighbours'.
+/// `record_above`, also returns the samples found farther than it (see [`Far`]).
 ///
 /// Samples: output → input, the centroid of each output triangle and the midpoint of each
 /// output edge (its corners are input vertices); input → output, the input vertices the output
@@ -267,9 +267,9 @@ fn measure(
     output: &[u32],
     part_size: &[f32],
     floor: f64,
-    hot_above: Option<f64>,
+    record_above: Option<f64>,
     original: Option<&Original>,
-) -> (f64, Vec<u32>, Vec<u32>) {
+) -> (f64, Far, Vec<u32>) {
     let (input, triangle_errors) = (sides.input, sides.triangle_errors);
     // Per input sample (7 per triangle), the output triangle its query stopped at: within the
     // returned error of it (see `assign_owned`); NOT_FOUND where the sample was not measured.
@@ -319,11 +319,11 @@ fn measure(
         });
     }
 
-    let limits = Limits { slack, hot2: hot_above.map(|h| (h * h) as f32) };
-    let hot2 = limits.hot2;
+    let limits = Limits { slack, record2: record_above.map(|h| (h * h) as f32) };
+    let record2 = limits.record2;
     let largest = triangle_errors.iter().copied().fold(0.0f32, f32::max) as f64;
     let mut worst = floor;
-    let mut hot = Vec::new();
+    let mut far = Far::default();
     // Samples of a triangle by its duty bits: corners, edge midpoints, centroid.
     let samples = |tri: Triangle<f32>, duty: u8| set_bits(duty).map(move |b| sample_point(&tri, b));
 
@@ -336,14 +336,14 @@ fn measure(
             let tri = [absolute(t[0]), absolute(t[1]), absolute(t[2])];
             for p in samples(tri, duty) {
                 let d = ((worst / SAMPLING_MARGIN - o.slack).max(0.0)) as f32;
-                let enough = hot2.map_or(d * d, |h| h.min(d * d));
+                let enough = d * d;
                 // Which triangle within `enough` does not matter here, only a distance beyond.
                 let (d2, nearest) = o.surface.within_squared(p, enough, hint, WALK_STEPS);
                 hint = nearest;
                 if d2 > enough {
                     worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + o.slack));
-                    if hot2.is_some_and(|h| d2 > h) {
-                        hot.extend(o.corners(mesh, nearest).iter().chain(t).map(|&v| id(v)));
+                    if record2.is_some_and(|h| d2 > h) {
+                        far.add(d2, o.corners(mesh, nearest).iter().chain(t).map(|&v| id(v)));
                     }
                 }
             }
@@ -358,8 +358,8 @@ fn measure(
                 hint = nearest;
                 if d2 > enough {
                     worst = worst.max(limits.total(d2, triangle_errors[nearest] as f64));
-                    if hot2.is_some_and(|h| d2 > h) {
-                        hot.extend(input[nearest * 3..nearest * 3 + 3].iter().chain(t).map(|&v| id(v)));
+                    if record2.is_some_and(|h| d2 > h) {
+                        far.add(d2, input[nearest * 3..nearest * 3 + 3].iter().chain(t).map(|&v| id(v)));
                     }
                 }
             }
@@ -378,7 +378,7 @@ fn measure(
     }
     let side =
         InputSide { mesh, input, tris: &input_tris, duty: &input_duty, errors: triangle_errors, reach: &reach_of };
-    let runs: Vec<(f64, Vec<u32>)> = found
+    let runs: Vec<(f64, Far)> = found
         .par_chunks_mut(7 * RUN_TRIANGLES)
         .enumerate()
         .map(|(k, found)| {
@@ -386,13 +386,42 @@ fn measure(
             side.measure(first, found, &output_surface, part_size, worst, limits)
         })
         .collect();
-    for (run_worst, run_hot) in runs {
+    for (run_worst, run_far) in runs {
         worst = worst.max(run_worst);
-        hot.extend(run_hot);
+        far.samples.extend(run_far.samples);
+    }
+    (worst, far, found)
+}
+
+/// Samples a measurement found farther from the other side than its `record_above`, with
+/// their exact distances (queries beyond the running bound find the nearest triangle), each
+/// with the position ids around it: the corners of the input triangle it lies on or is
+/// nearest to, and for an output sample, of its output triangle. These are the samples that
+/// raised the running maximum of their run, so the spots that set an outlier's error, not
+/// every sample beyond its hot threshold: the retry locks around them without a second pass
+/// over every sample (a full measure per retry, the whole input at the top levels), and the
+/// next retry locks around the spots that remain.
+#[derive(Default)]
+pub(crate) struct Far {
+    /// (squared distance, position id), a sample's ids one after another.
+    samples: Vec<(f32, u32)>,
+}
+
+impl Far {
+    fn add(&mut self, d2: f32, ids: impl Iterator<Item = u32>) {
+        self.samples.extend(ids.map(|p| (d2, p)));
     }
 
-    // The neighbours of the hot positions too: what a collapse moved there came from them.
-    if !hot.is_empty() {
+    /// The position ids around the samples farther than `above` (distance alone), and the
+    /// corners of the `input` triangles (welded ids) that use them: what a collapse moved
+    /// there came from them. Sorted, without repeats.
+    fn hot(&self, mesh: &WeldedMesh, input: &[u32], above: f64) -> Vec<u32> {
+        let above2 = (above * above) as f32;
+        let mut hot: Vec<u32> = self.samples.iter().filter(|s| s.0 > above2).map(|s| s.1).collect();
+        if hot.is_empty() {
+            return hot;
+        }
+        let id = |v: u32| mesh.position_ids[v as usize];
         hot.sort_unstable();
         hot.dedup();
         let ring: Vec<u32> = input
@@ -404,8 +433,8 @@ fn measure(
         hot.extend(ring);
         hot.sort_unstable();
         hot.dedup();
+        hot
     }
-    (worst, hot, found)
 }
 
 /// The bounds of a measurement's input: its entries `tris` (object coordinates), and with
@@ -428,20 +457,20 @@ fn input_bounds(tris: &[Triangle<f32>], owned: Option<&[Owned]>, absolute: impl 
 /// that the result does not depend on the thread count.
 const RUN_TRIANGLES: usize = 4096;
 
-/// When a sample's distance matters: the f32 rounding `slack` of a group's distances, and with
-/// outlier retries the squared distance above which a sample is hot.
+/// When a sample's distance matters: the f32 rounding `slack` of a group's distances, and the
+/// squared distance above which a sample found beyond the bound is recorded (see [`Far`]).
 #[derive(Clone, Copy)]
 struct Limits {
     slack: f64,
-    hot2: Option<f32>,
+    record2: Option<f32>,
 }
 
 impl Limits {
-    /// The squared distance below which a sample with member error `e` cannot raise `worst`
-    /// (nor is hot): the query may stop at any triangle within it.
+    /// The squared distance below which a sample with member error `e` cannot raise `worst`:
+    /// the query may stop at any triangle within it.
     fn enough2(&self, worst: f64, e: f64) -> f32 {
         let d = ((worst - e) / SAMPLING_MARGIN - self.slack).max(0.0) as f32;
-        self.hot2.map_or(d * d, |h| h.min(d * d))
+        d * d
     }
 
     /// A sample's bound: its distance (squared `d2`), rounded up, plus its member error `e`.
@@ -465,7 +494,7 @@ impl InputSide<'_> {
     /// Input → output for the triangles from `first` on whose `found` slots are given
     /// (7 per triangle), starting from the bound `worst`: the dropped vertices first (the
     /// farthest points, usually), so that the edge and centroid samples that follow mostly stop
-    /// at the first triangle within the worst. Returns the run's largest bound and its hot
+    /// at the first triangle within the worst. Returns the run's largest bound and its far
     /// positions, and fills `found` with the output triangle each query stopped at.
     fn measure(
         &self,
@@ -475,9 +504,9 @@ impl InputSide<'_> {
         part_size: &[f32],
         mut worst: f64,
         limits: Limits,
-    ) -> (f64, Vec<u32>) {
+    ) -> (f64, Far) {
         let id = |v: u32| self.mesh.position_ids[v as usize];
-        let mut hot = Vec::new();
+        let mut far = Far::default();
         let mut hint = usize::MAX;
         for pass in [0b000_0111u8, 0b111_1000] {
             for (j, slots) in found.chunks_exact_mut(7).enumerate() {
@@ -500,14 +529,14 @@ impl InputSide<'_> {
                     let d2 = if d2 > enough { d2.min(size() * size()) } else { d2 };
                     if d2 > enough {
                         worst = worst.max(limits.total(d2, e as f64));
-                        if limits.hot2.is_some_and(|h| d2 > h) {
-                            hot.extend(t.iter().map(|&v| id(v)));
+                        if limits.record2.is_some_and(|h| d2 > h) {
+                            far.add(d2, t.iter().map(|&v| id(v)));
                         }
                     }
                 }
             }
         }
-        (worst, hot)
+        (worst, far)
     }
 }
 
@@ -893,5 +922,27 @@ mod tests {
         // The simplifier's estimate wins when larger; an unchanged group measures 0.
         assert_eq!(group_error(&w, &input, &output, &sizes, 0.0, 2.0), 2.0);
         assert_eq!(group_error(&w, &input, &input, &sizes, 0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn far_samples_name_the_spot_that_sets_the_error() {
+        let (w, input, output) = tent(0.25);
+        let sizes = part_sizes(&w);
+        let id = |v: u32| w.position_ids[v as usize];
+        let peak = (0..w.positions.len() as u32).find(|&v| w.positions[v as usize][2] > 0.0).unwrap();
+        let errors = vec![0.0; input.len() / 3];
+        let sides = Sides { input: &input, triangle_errors: &errors, owned: None, small: 0.0 };
+        let (worst, far, _) = measure(&w, &sides, &output, &sizes, 0.0, Some(0.1), None);
+        // The peak (0.25 above the output) was found beyond the bound, so it is recorded; the
+        // hot positions are the peak's and those of every input triangle using it (all four).
+        let hot = far.hot(&w, &input, 0.2);
+        let mut all: Vec<u32> = input.iter().map(|&v| id(v)).collect();
+        all.sort_unstable();
+        all.dedup();
+        assert!(hot.binary_search(&id(peak)).is_ok() && hot == all, "{hot:?}");
+        // Nothing is farther than the error itself, nor recorded without a threshold.
+        assert!(far.hot(&w, &input, worst).is_empty());
+        let (_, none, _) = measure(&w, &sides, &output, &sizes, 0.0, None, None);
+        assert!(none.hot(&w, &input, 0.0).is_empty());
     }
 }
