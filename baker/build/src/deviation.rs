@@ -221,6 +221,39 @@ impl Original {
         Original { surface: Surface::new(tris, &ids), source, slack }
     }
 
+    /// Output → original for `output` (welded ids) with sample bits `duty`, from the bound
+    /// `worst`: the largest bound and the samples found farther than `record2` (squared).
+    /// Which original triangle within the bound a query stops at does not matter here, only a
+    /// distance beyond.
+    fn measure(
+        &self,
+        mesh: &WeldedMesh,
+        (output, duty): (&[u32], &[u8]),
+        mut worst: f64,
+        record2: Option<f32>,
+    ) -> (f64, Far) {
+        let absolute = |v: u32| mesh.positions[v as usize];
+        let id = |v: u32| mesh.position_ids[v as usize];
+        let mut far = Far::default();
+        let mut hint = usize::MAX;
+        for (t, &duty) in output.chunks_exact(3).zip(duty) {
+            let tri = [absolute(t[0]), absolute(t[1]), absolute(t[2])];
+            for p in set_bits(duty).map(|b| sample_point(&tri, b)) {
+                let d = ((worst / SAMPLING_MARGIN - self.slack).max(0.0)) as f32;
+                let enough = d * d;
+                let (d2, nearest) = self.surface.within_squared(p, enough, hint, WALK_STEPS);
+                hint = nearest;
+                if d2 > enough {
+                    worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + self.slack));
+                    if record2.is_some_and(|h| d2 > h) {
+                        far.add(d2, self.corners(mesh, nearest).iter().chain(t).map(|&v| id(v)));
+                    }
+                }
+            }
+        }
+        (worst, far)
+    }
+
     /// The welded vertex ids of triangle `t` (of `surface`).
     fn corners<'m>(&self, mesh: &'m WeldedMesh, t: usize) -> &'m [u32] {
         let t = self.source[t] as usize;
@@ -330,23 +363,16 @@ fn measure(
     // Output → input: the nearest input triangle's member error (any member's, until found
     // exactly).
     if let Some(o) = original {
-        let absolute = |v: u32| mesh.positions[v as usize];
-        let mut hint = usize::MAX;
-        for (t, &duty) in output.chunks_exact(3).zip(&output_duty) {
-            let tri = [absolute(t[0]), absolute(t[1]), absolute(t[2])];
-            for p in samples(tri, duty) {
-                let d = ((worst / SAMPLING_MARGIN - o.slack).max(0.0)) as f32;
-                let enough = d * d;
-                // Which triangle within `enough` does not matter here, only a distance beyond.
-                let (d2, nearest) = o.surface.within_squared(p, enough, hint, WALK_STEPS);
-                hint = nearest;
-                if d2 > enough {
-                    worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + o.slack));
-                    if record2.is_some_and(|h| d2 > h) {
-                        far.add(d2, o.corners(mesh, nearest).iter().chain(t).map(|&v| id(v)));
-                    }
-                }
-            }
+        // In runs side by side, each from the bound so far (the top levels' few groups have
+        // thousands of output triangles, far apart on the original surface).
+        let runs: Vec<(f64, Far)> = output
+            .par_chunks(3 * OUTPUT_RUN)
+            .zip(output_duty.par_chunks(OUTPUT_RUN))
+            .map(|(output, duty)| o.measure(mesh, (output, duty), worst, record2))
+            .collect();
+        for (run_worst, run_far) in runs {
+            worst = worst.max(run_worst);
+            far.samples.extend(run_far.samples);
         }
     } else {
         let input_bvh = Bvh::new(&input_tris);
@@ -369,9 +395,8 @@ fn measure(
     // Input → output, in runs measured in parallel (large groups are few, at the top levels).
     let ids: Vec<u32> = output.iter().map(|&v| id(v)).collect();
     let output_surface = Surface::new(output_tris, &ids);
-    let output_tris = &output_surface.tris;
     if sides.owned.is_some() {
-        let output = (output_surface.bvh(), &output_tris[..]);
+        let output = &output_surface;
         let bound = |e: f32| limits.enough2(worst, e as f64).sqrt();
         let input = (&input_tris[..], &reach_of[..]);
         accept_patches(input, (&mut input_duty, &mut found), output, triangle_errors, bound);
@@ -452,6 +477,11 @@ fn input_bounds(tris: &[Triangle<f32>], owned: Option<&[Owned]>, absolute: impl 
     let spheres = balls.par_iter().map(|b| union(of_points(&[b.center], b.radius), of_points(&[absolute(b.at)], 0.0)));
     union(corners, spheres.reduce(empty, union))
 }
+
+/// Output triangles measured together against the original surface in one parallel run of
+/// `Original::measure`: a group of the lower levels is one run. Fixed, so that the result does
+/// not depend on the thread count.
+const OUTPUT_RUN: usize = 1024;
 
 /// Input triangles measured together in one parallel run of `InputSide::measure`. Fixed, so
 /// that the result does not depend on the thread count.
@@ -558,7 +588,7 @@ impl InputSide<'_> {
 fn accept_patches(
     (input, reach): (&[Triangle<f32>], &[f32]),
     (duty, found): (&mut [u8], &mut [u32]),
-    (bvh, output): (&Bvh<f32>, &[Triangle<f32>]),
+    output: &Surface<f32>,
     triangle_errors: &[f32],
     bound: impl Fn(f32) -> f32 + Sync,
 ) {
@@ -574,7 +604,7 @@ fn accept_patches(
         return;
     }
     let boxes = BoxPyramid::new(leaves, triangle_errors);
-    let patches = Patches { boxes: &boxes, bvh, output, bound: &bound };
+    let patches = Patches { boxes: &boxes, output, bound: &bound };
     // The patches above runs of 2^PATCH_RUN entries first, then each such run left unsettled
     // on its own, side by side (a group's runs are many only at the top levels, where one group
     // holds every level-0 triangle); the same for any thread count.
@@ -604,8 +634,7 @@ const FEW_SMALL: usize = 8;
 /// What [`accept_patches`] settles patches with.
 struct Patches<'a, F> {
     boxes: &'a BoxPyramid,
-    bvh: &'a Bvh<f32>,
-    output: &'a [Triangle<f32>],
+    output: &'a Surface<f32>,
     bound: &'a F,
 }
 
@@ -640,7 +669,7 @@ impl<F: Fn(f32) -> f32> Patches<'_, F> {
             if radius < 0.5 * limit {
                 let center = centre(b);
                 let enough = (limit - radius) * (limit - radius);
-                let (d2, nearest) = self.bvh.nearest_squared(self.output, center, enough, hint);
+                let (d2, nearest) = self.output.nearest_squared(center, enough, hint, WALK_STEPS);
                 hint = nearest;
                 if d2 <= enough {
                     let run = (k << level) - first..((k + 1) << level).min(first + duty.len()) - first;
