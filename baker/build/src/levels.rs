@@ -11,9 +11,9 @@ use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopClust
 use crate::deviation::{part_sizes, simplify_measured, Original, Reference};
 use crate::error::BakeError;
 use crate::open;
-use crate::partition::{cluster_graph, partition, triangle_order};
+use crate::partition::{cluster_graph, one_group, partition, triangle_order};
 use crate::progress::Progress;
-use crate::samples::{assign_owned, merge_owned, sort_owned, Owned};
+use crate::samples::{assign_owned, keep_together, merge_owned, sort_owned, Owned};
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Locks, Method};
 use crate::weld::WeldedMesh;
@@ -276,7 +276,7 @@ impl<'a> Builder<'a> {
         let masks: Vec<u8> = members().flat_map(|m| m.open.iter().copied()).collect();
         let members_error = members().map(|m| m.own_error).fold(0.0, f32::max);
         let owned = match settings.error_bound {
-            ErrorBound::Measured => merge_owned(members().flat_map(|m| m.owned.iter().copied())),
+            ErrorBound::Measured => merge_owned(members().map(|m| m.owned.as_slice())),
             ErrorBound::Simplifier => Vec::new(),
         };
         let (s, error, found) = match settings.error_bound {
@@ -295,6 +295,10 @@ impl<'a> Builder<'a> {
         let open = open::mark(mesh, &indices, &s.needed);
         let owned = if owned.is_empty() {
             vec![Vec::new(); indices.len()]
+        } else if part.len() == self.pending.len() && one_group(indices.len(), settings.group_size as usize) {
+            // The level's only group, whose children will all form the next level's only
+            // group: handing its samples down to them only to join them again is spared.
+            keep_together(mesh, owned, s.indices.len() / 3, (error, part_size), indices.len())
         } else {
             assign_owned(mesh, &owned, (&s.indices, &found), &indices, (error, part_size))
         };

@@ -169,9 +169,15 @@ pub fn partition(graph: &ClusterGraph, target: usize) -> Vec<Vec<u32>> {
     groups
 }
 
+/// Whether [`partition`] makes one group of `n` clusters for a `target` group size.
+pub fn one_group(n: usize, target: usize) -> bool {
+    let target = target.max(1);
+    n <= target + target / 2
+}
+
 fn bisect(graph: &ClusterGraph, nodes: Vec<u32>, target: usize, local: &mut [u32], out: &mut Vec<Vec<u32>>) {
     let n = nodes.len();
-    if n <= target + target / 2 {
+    if one_group(n, target) {
         out.push(nodes);
         return;
     }

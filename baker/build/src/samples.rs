@@ -120,10 +120,20 @@ pub fn sort_owned(owned: &mut [Owned]) {
     owned.sort_unstable_by(Owned::order);
 }
 
-/// The level-0 samples of a group's members, sorted (so in Morton order), one entry per
-/// triangle (the bits of one triangle owned by several members are joined) and per ball.
-pub fn merge_owned(owned: impl Iterator<Item = Owned>) -> Vec<Owned> {
-    let mut all: Vec<Owned> = owned.collect();
+/// The level-0 samples of a group's members (their lists), sorted (so in Morton order), one
+/// entry per triangle (the bits of one triangle owned by several members are joined) and per
+/// ball.
+pub fn merge_owned<'a>(lists: impl Iterator<Item = &'a [Owned]>) -> Vec<Owned> {
+    let lists: Vec<&[Owned]> = lists.filter(|l| !l.is_empty()).collect();
+    // One member's list is sorted and has one entry per triangle already (see
+    // `keep_together`): what sorting and joining would give.
+    if let [one] = lists[..] {
+        return one.to_vec();
+    }
+    let mut all: Vec<Owned> = Vec::with_capacity(lists.iter().map(|l| l.len()).sum());
+    for list in lists {
+        all.extend_from_slice(list);
+    }
     // Each member's list is sorted (see `assign_owned`, and level 0's): the stable sort merges
     // such runs instead of sorting from scratch, and on a total order it gives the same result
     // (on every thread for the large groups of the top levels).
@@ -216,6 +226,35 @@ pub fn assign_owned(
         }
     };
     out.into_par_iter().zip(children).map(gathered).collect()
+}
+
+/// The samples of a group whose children will all be grouped together at the next level (the
+/// level's only group, with few enough children for one group): they stay one list, given to
+/// the first child (the others get none; the next group joins them all), gathered into balls
+/// as [`assign_owned`] does, in fixed runs side by side. Handing every sample down to a child
+/// only for the next group to sort them together again was, at the top levels, most of the
+/// cost of a level beside the measure. `owned` is the group's (sorted), `output_triangles` its
+/// result's triangle count, `error` its stored error.
+pub fn keep_together(
+    mesh: &WeldedMesh,
+    owned: Vec<Owned>,
+    output_triangles: usize,
+    (error, part_size): (f32, &[f32]),
+    children: usize,
+) -> Vec<Vec<Owned>> {
+    let limit = BALL_FRACTION * error as f64;
+    let list = if owned.len() >= GATHER_RATIO * output_triangles {
+        let runs: Vec<Vec<Owned>> =
+            owned.par_chunks(HAND_DOWN_RUN).map(|run| gather(mesh, run.to_vec(), limit, part_size)).collect();
+        runs.concat()
+    } else {
+        owned
+    };
+    let mut out = vec![Vec::new(); children];
+    if let Some(first) = out.first_mut() {
+        *first = list;
+    }
+    out
 }
 
 /// Entries handed down together by one call of [`hand_down`]: a group of the lower levels
@@ -482,6 +521,37 @@ mod tests {
         let coarser = gather(&mesh, balls.clone(), 4.0, &sizes);
         assert!(coarser.len() < balls.len());
         covered(&mesh, &owned, &coarser);
+    }
+
+    #[test]
+    fn samples_kept_together_join_again_unchanged() {
+        let (mesh, owned) = grid(12);
+        let sizes = vec![1e9f32; mesh.position_count];
+        // Too few samples per output triangle to gather: the list itself, on the first child.
+        let kept = keep_together(&mesh, owned.clone(), owned.len(), (0.1, &sizes), 3);
+        assert_eq!(kept.len(), 3);
+        assert!(kept[0] == owned && kept[1].is_empty() && kept[2].is_empty());
+        assert_eq!(merge_owned(kept.iter().map(Vec::as_slice)), owned);
+        // Many: gathered into balls that still hold every triangle, in order.
+        let kept = keep_together(&mesh, owned.clone(), 2, (7.5, &sizes), 2);
+        assert!(kept[0].len() * 2 < owned.len() && kept[1].is_empty());
+        assert!(kept[0].windows(2).all(|w| w[0].order(&w[1]).is_le()));
+        covered(&mesh, &owned, &kept[0]);
+        // Lists split among members join into the sorted list, bits of a shared triangle
+        // joined.
+        let (mut a, mut b): (Vec<Owned>, Vec<Owned>) = (Vec::new(), Vec::new());
+        for (i, o) in owned.iter().enumerate() {
+            let Samples::Triangle(t, bits) = o.samples else { unreachable!() };
+            match i % 3 {
+                0 => a.push(*o),
+                1 => b.push(*o),
+                _ => {
+                    a.push(Owned::triangle(o.code, t, bits & 0x0f));
+                    b.push(Owned::triangle(o.code, t, bits & 0x70));
+                }
+            }
+        }
+        assert_eq!(merge_owned([a.as_slice(), &[], b.as_slice()].into_iter()), owned);
     }
 
     #[test]
