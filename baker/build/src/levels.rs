@@ -18,7 +18,7 @@ use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Locks, Method};
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
-use mres_geom::edges::edge_keys;
+use mres_geom::edges::{edge_keys, sorted_edge_keys};
 use rayon::prelude::*;
 use std::borrow::Cow;
 
@@ -146,17 +146,19 @@ impl<'a> Builder<'a> {
     /// A builder whose pending clusters are `clusters` (triangles into `mesh`); new groups
     /// start at `level`.
     pub fn new(mesh: &'a WeldedMesh, settings: &'a BakeSettings, clusters: Vec<BuiltCluster>, level: u32) -> Self {
-        Self::with_original(mesh, settings, clusters, level, None)
+        Self::with_original(mesh, settings, clusters, level, (None, None))
     }
 
     /// [`Builder::new`] with the whole level-0 surface already built where the caller has it
-    /// (`Original::new`, made while the level-0 clusters were).
+    /// (`Original::new`, made while the level-0 clusters were), and the positions always
+    /// locked where it has them ([`Level0Edges::locked`], for level-0 clusters of a whole
+    /// mesh).
     pub fn with_original(
         mesh: &'a WeldedMesh,
         settings: &'a BakeSettings,
         clusters: Vec<BuiltCluster>,
         level: u32,
-        original: Option<Original>,
+        (original, locked): (Option<Original>, Option<Vec<u8>>),
     ) -> Self {
         let from_level0 = clusters.iter().all(|c| c.own_group == NO_GROUP && !c.owned.is_empty());
         let measured = settings.error_bound == ErrorBound::Measured;
@@ -166,7 +168,10 @@ impl<'a> Builder<'a> {
                 (measured && from_level0)
                     .then(|| original.unwrap_or_else(|| Original::new(mesh, &triangle_order(mesh))))
             },
-            || rayon::join(|| always_locked(mesh, &clusters), || if measured { part_sizes(mesh) } else { Vec::new() }),
+            || {
+                let locked = || locked.unwrap_or_else(|| always_locked(mesh, &clusters));
+                rayon::join(locked, || if measured { part_sizes(mesh) } else { Vec::new() })
+            },
         );
         let pending = (0..clusters.len()).collect();
         let stats = BuildStats::default();
@@ -463,13 +468,95 @@ fn always_locked(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<u8> {
         );
     edges.par_sort_unstable();
     marked.par_sort_unstable();
-    let mut locked = vec![0u8; mesh.position_count];
-    for run in edges.chunk_by(|a, b| a == b) {
-        let marks = open::count(&marked, run[0]);
-        let why =
-            if (run.len() - marks) % 2 == 1 { CELL_BORDER } else { 0 } | if run.len() >= 3 { NON_MANIFOLD } else { 0 };
-        locked[(run[0] >> 32) as usize] |= why;
-        locked[(run[0] & 0xffff_ffff) as usize] |= why;
+    let runs = edges.chunk_by(|a, b| a == b).map(|run| (run[0], run.len(), open::count(&marked, run[0])));
+    locks_of(mesh.position_count, runs)
+}
+
+/// The sorted edge keys of a whole welded mesh (position ids), sorted once for what level 0
+/// needs of them: its odd (open) edges, and the positions its builder keeps locked.
+pub(crate) struct Level0Edges {
+    keys: Vec<u64>,
+}
+
+impl Level0Edges {
+    /// The edges of `mesh`'s triangles.
+    pub fn new(mesh: &WeldedMesh) -> Level0Edges {
+        Level0Edges { keys: sorted_edge_keys(&mesh.indices, |v| mesh.position_ids[v as usize]) }
+    }
+
+    /// The edges used an odd number of times (the open ones), sorted: what the level-0
+    /// clusters mark (see [`crate::open::mark`]).
+    pub fn odd(&self) -> Vec<u64> {
+        open::odd_of(&self.keys)
+    }
+
+    /// [`always_locked`] of level-0 clusters that together hold every triangle of `mesh` and
+    /// mark its odd edges once each (`level0`): an edge's uses less its marks are then
+    /// always even, so no position is on a cell border, and the positions of edges used three
+    /// times or more are non-manifold. The same values, without sorting the edges again.
+    pub fn locked(&self, mesh: &WeldedMesh) -> Vec<u8> {
+        let runs = self.keys.chunk_by(|a, b| a == b).map(|r| (r[0], r.len(), r.len() % 2));
+        locks_of(mesh.position_count, runs)
+    }
+}
+
+/// Per position, the `always_locked` reasons of edge `runs`: (key, uses, marks).
+fn locks_of(positions: usize, runs: impl Iterator<Item = (u64, usize, usize)>) -> Vec<u8> {
+    let mut locked = vec![0u8; positions];
+    for (key, uses, marks) in runs {
+        let why = if (uses - marks) % 2 == 1 { CELL_BORDER } else { 0 } | if uses >= 3 { NON_MANIFOLD } else { 0 };
+        locked[(key >> 32) as usize] |= why;
+        locked[(key & 0xffff_ffff) as usize] |= why;
     }
     locked
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::weld::weld;
+    use mres_import::SourceMesh;
+
+    /// A strip of quads (open rim) with a fin: a third triangle on one inner edge.
+    fn finned_strip() -> WeldedMesh {
+        let mut positions = Vec::new();
+        for x in 0..6 {
+            positions.extend([[x as f32, 0.0, 0.0], [x as f32, 1.0, 0.0]]);
+        }
+        positions.push([2.0, 0.5, 1.0]);
+        let mut indices = Vec::new();
+        for x in 0..5u32 {
+            let (a, b, c, d) = (2 * x, 2 * x + 2, 2 * x + 3, 2 * x + 1);
+            indices.extend([a, b, c, a, c, d]);
+        }
+        indices.extend([4, 5, 12]);
+        let triangles = indices.len() / 3;
+        let source = SourceMesh {
+            positions,
+            uvs: None,
+            normals: None,
+            indices,
+            materials: vec![0; triangles],
+            degenerate_dropped: 0,
+        };
+        weld(&source, &BakeSettings::default()).unwrap()
+    }
+
+    #[test]
+    fn level0_locks_from_the_sorted_edges_match_the_clusters() {
+        let mesh = finned_strip();
+        let edges = Level0Edges::new(&mesh);
+        let clusters = level0(&mesh, &BakeSettings::default(), &edges.odd(), &triangle_order(&mesh));
+        let locked = edges.locked(&mesh);
+        assert_eq!(locked, always_locked(&mesh, &clusters));
+        // The fin's edge is non-manifold at both ends; nothing is a cell border.
+        let id = |v: usize| mesh.position_ids[mesh.positions.iter().position(|p| *p == [2.0, v as f32, 0.0]).unwrap()];
+        assert!(locked[id(0) as usize] & NON_MANIFOLD != 0 && locked[id(1) as usize] & NON_MANIFOLD != 0);
+        assert_eq!(locked.iter().filter(|&&l| l & NON_MANIFOLD != 0).count(), 2);
+        assert!(locked.iter().all(|&l| l & CELL_BORDER == 0));
+        // A cluster whose open edge is left unmarked puts it on a cell border.
+        let mut unmarked = clusters.clone();
+        unmarked[0].open.iter_mut().for_each(|m| *m = 0);
+        assert!(always_locked(&mesh, &unmarked).iter().any(|&l| l & CELL_BORDER != 0));
+    }
 }

@@ -20,7 +20,11 @@ pub fn triangle_edges(mesh: &WeldedMesh, indices: &[u32], t: usize) -> [u64; 3] 
 
 /// The edges `indices` uses an odd number of times, sorted.
 pub fn odd_edges(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
-    let keys = sorted_edge_keys(indices, |v| mesh.position_ids[v as usize]);
+    odd_of(&sorted_edge_keys(indices, |v| mesh.position_ids[v as usize]))
+}
+
+/// The keys that occur an odd number of times in sorted `keys`, sorted.
+pub fn odd_of(keys: &[u64]) -> Vec<u64> {
     keys.chunk_by(|a, b| a == b).filter(|r| r.len() % 2 == 1).map(|r| r[0]).collect()
 }
 

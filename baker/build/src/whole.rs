@@ -4,7 +4,7 @@
 use crate::dag::{BuildStats, BuiltDag, Collected, DagOutput, Frame, StageClock};
 use crate::deviation::Original;
 use crate::error::BakeError;
-use crate::levels::{level0, Builder};
+use crate::levels::{level0, Builder, Level0Edges};
 use crate::partition::triangle_order;
 use crate::progress::Progress;
 use crate::settings::{BakeSettings, ErrorBound};
@@ -32,12 +32,16 @@ pub fn build_whole<O: DagOutput>(
     // The whole level-0 surface that errors are measured against, made beside the clusters.
     let measured = settings.error_bound == ErrorBound::Measured;
     let order = triangle_order(&welded);
+    // The mesh's edges, sorted once: its open edges for the clusters, its locked positions.
+    let edges = Level0Edges::new(&welded);
     let (original, clusters) = rayon::join(
         || measured.then(|| Original::new(&welded, &order)),
-        || level0(&welded, settings, &crate::open::odd_edges(&welded, &welded.indices), &order),
+        || level0(&welded, settings, &edges.odd(), &order),
     );
     drop(order);
-    let mut builder = Builder::with_original(&welded, settings, clusters, 0, original);
+    let locked = edges.locked(&welded);
+    drop(edges);
+    let mut builder = Builder::with_original(&welded, settings, clusters, 0, (original, Some(locked)));
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
     builder.build_to_root(progress);
