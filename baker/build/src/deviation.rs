@@ -370,10 +370,7 @@ fn measure(
             .zip(output_duty.par_chunks(OUTPUT_RUN))
             .map(|(output, duty)| o.measure(mesh, (output, duty), worst, record2))
             .collect();
-        for (run_worst, run_far) in runs {
-            worst = worst.max(run_worst);
-            far.samples.extend(run_far.samples);
-        }
+        far.join(&mut worst, runs);
     } else {
         let input_bvh = Bvh::new(&input_tris);
         let mut hint = usize::MAX;
@@ -411,10 +408,7 @@ fn measure(
             side.measure(first, found, &output_surface, part_size, worst, limits)
         })
         .collect();
-    for (run_worst, run_far) in runs {
-        worst = worst.max(run_worst);
-        far.samples.extend(run_far.samples);
-    }
+    far.join(&mut worst, runs);
     (worst, far, found)
 }
 
@@ -435,6 +429,15 @@ pub(crate) struct Far {
 impl Far {
     fn add(&mut self, d2: f32, ids: impl Iterator<Item = u32>) {
         self.samples.extend(ids.map(|p| (d2, p)));
+    }
+
+    /// Joins the results of runs measured side by side, in order: `worst` becomes the largest
+    /// of their bounds, and their samples follow these.
+    fn join(&mut self, worst: &mut f64, runs: Vec<(f64, Far)>) {
+        for (run_worst, run_far) in runs {
+            *worst = worst.max(run_worst);
+            self.samples.extend(run_far.samples);
+        }
     }
 
     /// The position ids around the samples farther than `above` (distance alone), and the
@@ -597,9 +600,12 @@ fn accept_patches(
     }
     let leaves = BoxPyramid::leaves((input, reach), duty);
     // A patch settles only if each of its entries' boxes is as small as it must be, for the
-    // smallest member error: count those (an upper bound on what patches can settle).
-    let (half, measured) = (0.5 * bound(0.0), duty.iter().filter(|&&d| d != 0).count());
-    let small = leaves.par_iter().with_min_len(4096).filter(|b| half_diagonal(b).is_some_and(|r| r < half)).count();
+    // smallest member error: count those (an upper bound on what patches can settle) among
+    // the entries to measure (those with a box).
+    let half = 0.5 * bound(0.0);
+    let count = |b: &Box3| half_diagonal(b).map_or((0, 0), |r| (1, usize::from(r < half)));
+    let (measured, small) =
+        leaves.par_iter().with_min_len(4096).map(count).reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     if small * FEW_SMALL < measured {
         return;
     }

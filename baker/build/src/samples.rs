@@ -219,7 +219,7 @@ pub fn assign_owned(
     }
     let limit = BALL_FRACTION * error as f64;
     let gathered = |(list, c): (Vec<Owned>, &Vec<u32>)| {
-        if list.len() >= GATHER_RATIO * c.len() / 3 {
+        if dense(list.len(), c.len() / 3) {
             gather(mesh, list, limit, part_size)
         } else {
             list
@@ -243,7 +243,7 @@ pub fn keep_together(
     children: usize,
 ) -> Vec<Vec<Owned>> {
     let limit = BALL_FRACTION * error as f64;
-    let list = if owned.len() >= GATHER_RATIO * output_triangles {
+    let list = if dense(owned.len(), output_triangles) {
         let runs: Vec<Vec<Owned>> =
             owned.par_chunks(HAND_DOWN_RUN).map(|run| gather(mesh, run.to_vec(), limit, part_size)).collect();
         runs.concat()
@@ -255,6 +255,12 @@ pub fn keep_together(
         *first = list;
     }
     out
+}
+
+/// Whether `samples` entries over `triangles` triangles are gathered into balls (see
+/// [`GATHER_RATIO`]).
+fn dense(samples: usize, triangles: usize) -> bool {
+    samples >= GATHER_RATIO * triangles
 }
 
 /// Entries handed down together by one call of [`hand_down`]: a group of the lower levels
