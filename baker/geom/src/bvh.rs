@@ -393,7 +393,29 @@ pub fn point_triangle_distance<T: Real>(p: [T; 3], t: &Triangle<T>) -> T {
 }
 
 /// Squared [`point_triangle_distance`].
+#[inline]
 pub fn point_triangle_distance2<T: Real>(p: [T; 3], t: &Triangle<T>) -> T {
+    closest_feature2(p, t).0
+}
+
+/// Where on a triangle the closest point to a point lies: inside the face, on edge k (from
+/// corner k to corner k + 1), or at corner k.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feature {
+    /// Inside the face.
+    Face,
+    /// On the edge from corner k to corner k + 1 (mod 3).
+    Edge(usize),
+    /// At a corner: its two edges, the one the point leans towards more first.
+    Corner([usize; 2]),
+}
+
+/// [`point_triangle_distance2`] and the feature of `t` that holds the closest point, by
+/// Ericson's regions ("Real-Time Collision Detection" §5.1.5): one pass for walks, which need
+/// both (see [`crate::walk`]); where only the distance is used the feature's comparisons are
+/// dead code and vanish.
+#[inline(always)]
+pub fn closest_feature2<T: Real>(p: [T; 3], t: &Triangle<T>) -> (T, Feature) {
     let sub = |a: [T; 3], b: [T; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
     let dot = |a: [T; 3], b: [T; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     let zero = T::ZERO;
@@ -404,34 +426,37 @@ pub fn point_triangle_distance2<T: Real>(p: [T; 3], t: &Triangle<T>) -> T {
         let q = [a[0] + ab[0] * u + ac[0] * v, a[1] + ab[1] * u + ac[1] * v, a[2] + ab[2] * u + ac[2] * v];
         dot(sub(p, q), sub(p, q))
     };
+    // Corner A: towards B (edge 0) or towards C (edge 2), whichever p leans to.
     if d1 <= zero && d2 <= zero {
-        return dot(ap, ap);
+        return (dot(ap, ap), Feature::Corner(if d1 >= d2 { [0, 2] } else { [2, 0] }));
     }
     let bp = sub(p, b);
     let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    // Corner B: towards A (edge 0, along −ab) or towards C (edge 1, along ac − ab).
     if d3 >= zero && d4 <= d3 {
-        return dot(bp, bp);
+        return (dot(bp, bp), Feature::Corner(if zero - d3 >= d4 - d3 { [0, 1] } else { [1, 0] }));
     }
     let vc = d1 * d4 - d3 * d2;
     if vc <= zero && d1 >= zero && d3 <= zero {
-        return at(d1 / (d1 - d3), zero);
+        return (at(d1 / (d1 - d3), zero), Feature::Edge(0));
     }
     let cp = sub(p, c);
     let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    // Corner C: towards A (edge 2, along −ac) or towards B (edge 1, along ab − ac).
     if d6 >= zero && d5 <= d6 {
-        return dot(cp, cp);
+        return (dot(cp, cp), Feature::Corner(if zero - d6 >= d5 - d6 { [2, 1] } else { [1, 2] }));
     }
     let vb = d5 * d2 - d1 * d6;
     if vb <= zero && d2 >= zero && d6 <= zero {
-        return at(zero, d2 / (d2 - d6));
+        return (at(zero, d2 / (d2 - d6)), Feature::Edge(2));
     }
     let va = d3 * d6 - d5 * d4;
     if va <= zero && (d4 - d3) >= zero && (d5 - d6) >= zero {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return at(T::ONE - w, w);
+        return (at(T::ONE - w, w), Feature::Edge(1));
     }
     let denom = T::ONE / (va + vb + vc);
-    at(vb * denom, vc * denom)
+    (at(vb * denom, vc * denom), Feature::Face)
 }
 
 #[cfg(test)]
@@ -460,6 +485,49 @@ mod tests {
         let bvh = Bvh::new(&small);
         let (d2, t) = bvh.nearest_squared(&small, [20.2, 0.2, -2.0], 0.0, 90);
         assert!((d2 - 4.0f32).abs() < 1e-5 && t == 20, "{d2} {t}");
+    }
+
+    #[test]
+    fn the_closest_feature_holds_the_closest_point() {
+        // Distance to segment a-b, and to the plane of t where the foot is inside.
+        let segment2 = |p: [f64; 3], a: [f64; 3], b: [f64; 3]| {
+            let ab = [0, 1, 2].map(|k| b[k] - a[k]);
+            let ap = [0, 1, 2].map(|k| p[k] - a[k]);
+            let u = ((0..3).map(|k| ab[k] * ap[k]).sum::<f64>() / (0..3).map(|k| ab[k] * ab[k]).sum::<f64>())
+                .clamp(0.0, 1.0);
+            (0..3).map(|k| (ap[k] - u * ab[k]).powi(2)).sum::<f64>()
+        };
+        let t: Triangle<f64> = [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.5, 1.5, 0.0]];
+        let (mut faces, mut edges, mut corners) = (0, 0, 0);
+        for i in 0..41 {
+            for j in 0..41 {
+                let p = [i as f64 * 0.1 - 1.0, j as f64 * 0.1 - 1.0, 0.3];
+                let (d2, feature) = closest_feature2(p, &t);
+                assert!((d2 - point_triangle_distance2(p, &t)).abs() == 0.0);
+                let edge2 = |k: usize| segment2(p, t[k], t[(k + 1) % 3]);
+                let nearest_edge = (0..3).map(edge2).fold(f64::INFINITY, f64::min);
+                match feature {
+                    // Above the face: the plane's distance, nearer than any edge.
+                    Feature::Face => {
+                        faces += 1;
+                        assert!((d2 - 0.09).abs() < 1e-12 && d2 <= nearest_edge + 1e-12, "{p:?}");
+                    }
+                    Feature::Edge(k) => {
+                        edges += 1;
+                        assert!((d2 - edge2(k)).abs() < 1e-12 && d2 >= 0.09 - 1e-12, "{p:?} {k}");
+                    }
+                    // A corner's two edges meet at it; it is the closest point.
+                    Feature::Corner([e, f]) => {
+                        corners += 1;
+                        let corner = if (e + 1) % 3 == f { f } else { e };
+                        assert!(e != f && (e + 1) % 3 == f || (f + 1) % 3 == e);
+                        let c2 = (0..3).map(|k| (p[k] - t[corner][k]).powi(2)).sum::<f64>();
+                        assert!((d2 - c2).abs() < 1e-12, "{p:?} {feature:?}");
+                    }
+                }
+            }
+        }
+        assert!(faces > 0 && edges > 0 && corners > 0, "{faces} {edges} {corners}");
     }
 
     /// Pseudo-random triangles in a unit cube (a fixed linear congruential sequence).

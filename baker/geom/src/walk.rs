@@ -11,7 +11,7 @@
 //! No library walks a general triangle soup in 3-D by closest-point regions (triangulation
 //! crates walk planar Delaunay meshes), so this is written here.
 
-use crate::bvh::{point_triangle_distance2, Bvh, Real, Triangle};
+use crate::bvh::{closest_feature2, Bvh, Feature, Real, Triangle};
 use crate::edges::edge_key;
 use rayon::prelude::*;
 
@@ -50,21 +50,27 @@ impl Neighbours {
     /// `enough2` of `p`, or to the closest one it tested, and that triangle.
     pub fn walk<T: Real>(&self, tris: &[Triangle<T>], p: [T; 3], enough2: T, start: usize, steps: usize) -> (T, usize) {
         let mut at = start;
-        let mut best = (point_triangle_distance2(p, &tris[at]), at);
+        let (d, mut feature) = closest_feature2(p, &tris[at]);
+        let mut best = (d, at);
         let mut from = NONE;
         for _ in 0..steps {
             if best.0 <= enough2 {
                 break;
             }
             // At a corner, the other edge of the corner where the first leads nowhere new.
-            let Some([first, second]) = exit_edges(p, &tris[at]) else { break };
+            let [first, second] = match feature {
+                Feature::Face => break,
+                Feature::Edge(k) => [k; 2],
+                Feature::Corner(edges) => edges,
+            };
             let open = |e: usize| {
                 let t = self.across[at][e];
                 (t != NONE && t != from).then_some(t)
             };
             let Some(next) = open(first).or_else(|| open(second)) else { break };
             (from, at) = (at as u32, next as usize);
-            let d = point_triangle_distance2(p, &tris[at]);
+            let d;
+            (d, feature) = closest_feature2(p, &tris[at]);
             if d < best.0 {
                 best = (d, at);
             }
@@ -126,50 +132,10 @@ impl<T: Real> Surface<T> {
     }
 }
 
-/// The edge (k: from corner k to corner k + 1) beyond which the closest point of triangle `t`
-/// to `p` lies, by Ericson's regions ("Real-Time Collision Detection" §5.1.5), twice; for a
-/// corner, its two edges, the one that points more towards `p` first; `None` where the closest
-/// point is inside the face.
-fn exit_edges<T: Real>(p: [T; 3], t: &Triangle<T>) -> Option<[usize; 2]> {
-    let sub = |a: [T; 3], b: [T; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let dot = |a: [T; 3], b: [T; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    let zero = T::ZERO;
-    let (a, b, c) = (t[0], t[1], t[2]);
-    let (ab, ac) = (sub(b, a), sub(c, a));
-    let (ap, bp, cp) = (sub(p, a), sub(p, b), sub(p, c));
-    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
-    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
-    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
-    // Corner A: towards B (edge 0) or towards C (edge 2), whichever p leans to.
-    if d1 <= zero && d2 <= zero {
-        return Some(if d1 >= d2 { [0, 2] } else { [2, 0] });
-    }
-    // Corner B: towards A (edge 0, along −ab) or towards C (edge 1, along ac − ab).
-    if d3 >= zero && d4 <= d3 {
-        return Some(if zero - d3 >= d4 - d3 { [0, 1] } else { [1, 0] });
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= zero && d1 >= zero && d3 <= zero {
-        return Some([0; 2]);
-    }
-    // Corner C: towards A (edge 2, along −ac) or towards B (edge 1, along ab − ac).
-    if d6 >= zero && d5 <= d6 {
-        return Some(if zero - d6 >= d5 - d6 { [2, 1] } else { [1, 2] });
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= zero && d2 >= zero && d6 <= zero {
-        return Some([2; 2]);
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= zero && (d4 - d3) >= zero && (d5 - d6) >= zero {
-        return Some([1; 2]);
-    }
-    None
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bvh::point_triangle_distance2;
 
     /// A flat `n` × `n` grid of unit squares, two triangles each, and its corners' ids.
     fn grid(n: u32) -> (Vec<Triangle<f64>>, Vec<u32>) {
