@@ -14,6 +14,7 @@
 //! the order in which groups finish.
 
 use mres_geom::edges::{edge_ends, edge_key};
+use rayon::prelude::*;
 
 /// Per level: the groups using each shared position, and the edges between two shared
 /// positions that the level's input already has.
@@ -28,12 +29,19 @@ impl Chords {
     /// The chords of a level whose groups are `parts` (lists of cluster indices into `refs`,
     /// the clusters' triangles in welded ids) over a mesh whose welded vertices map to
     /// `position_ids`; `shared(p)` tells a position used by two or more groups.
-    pub fn new(parts: &[Vec<u32>], refs: &[&[u32]], position_ids: &[u32], shared: impl Fn(u32) -> bool) -> Chords {
-        let mut users = Vec::new();
-        let mut existing = Vec::new();
-        for (g, part) in parts.iter().enumerate() {
-            for &c in part {
-                for t in refs[c as usize].chunks_exact(3) {
+    pub fn new(
+        parts: &[Vec<u32>],
+        refs: &[&[u32]],
+        position_ids: &[u32],
+        shared: impl Fn(u32) -> bool + Sync,
+    ) -> Chords {
+        // Per group side by side; sorted and deduplicated, so the order does not matter.
+        let (users, existing): (Vec<_>, Vec<_>) = parts
+            .par_iter()
+            .enumerate()
+            .map(|(g, part)| {
+                let (mut users, mut existing) = (Vec::new(), Vec::new());
+                for t in part.iter().flat_map(|&c| refs[c as usize].chunks_exact(3)) {
                     let p = [0, 1, 2].map(|k| position_ids[t[k] as usize]);
                     for k in 0..3 {
                         let (a, b) = (p[k], p[(k + 1) % 3]);
@@ -45,11 +53,13 @@ impl Chords {
                         }
                     }
                 }
-            }
-        }
-        users.sort_unstable();
+                (users, existing)
+            })
+            .unzip();
+        let (mut users, mut existing) = (users.concat(), existing.concat());
+        users.par_sort_unstable();
         users.dedup();
-        existing.sort_unstable();
+        existing.par_sort_unstable();
         existing.dedup();
         Chords { users, existing }
     }

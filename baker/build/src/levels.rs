@@ -21,6 +21,7 @@ use mres_format::NO_GROUP;
 use mres_geom::edges::{edge_keys, sorted_edge_keys};
 use rayon::prelude::*;
 use std::borrow::Cow;
+use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
 /// Most clusters the final root group may hold. A mesh whose coarsest clusters cannot be
 /// simplified further (an open boundary is locked in every cut) ends in one root group of up
@@ -150,15 +151,15 @@ impl<'a> Builder<'a> {
     }
 
     /// [`Builder::new`] with the whole level-0 surface already built where the caller has it
-    /// (`Original::new`, made while the level-0 clusters were), and the positions always
-    /// locked where it has them ([`Level0Edges::locked`], for level-0 clusters of a whole
-    /// mesh).
+    /// (`Original::new`, made while the level-0 clusters were), and the mesh's sorted edges
+    /// where it has them, for the positions always locked ([`Level0Edges::locked`], for
+    /// level-0 clusters of a whole mesh).
     pub fn with_original(
         mesh: &'a WeldedMesh,
         settings: &'a BakeSettings,
         clusters: Vec<BuiltCluster>,
         level: u32,
-        (original, locked): (Option<Original>, Option<Vec<u8>>),
+        (original, edges): (Option<Original>, Option<&Level0Edges>),
     ) -> Self {
         let from_level0 = clusters.iter().all(|c| c.own_group == NO_GROUP && !c.owned.is_empty());
         let measured = settings.error_bound == ErrorBound::Measured;
@@ -169,7 +170,7 @@ impl<'a> Builder<'a> {
                     .then(|| original.unwrap_or_else(|| Original::new(mesh, &triangle_order(mesh))))
             },
             || {
-                let locked = || locked.unwrap_or_else(|| always_locked(mesh, &clusters));
+                let locked = || edges.map_or_else(|| always_locked(mesh, &clusters), |e| e.locked(mesh));
                 rayon::join(locked, || if measured { part_sizes(mesh) } else { Vec::new() })
             },
         );
@@ -235,23 +236,16 @@ impl<'a> Builder<'a> {
     /// Two rounds, for the chords between locked positions (see [`crate::chords`]).
     fn simplify_parts(&self, parts: &[Vec<u32>], refs: &[&[u32]], lock: u8) -> Vec<Option<Simplified>> {
         let mesh = self.mesh;
-        // Which group uses each position; positions used by two groups are locked.
-        let mut owner = vec![u32::MAX; mesh.position_count];
-        for (g, part) in parts.iter().enumerate() {
-            for &c in part {
-                for &v in refs[c as usize] {
-                    let o = &mut owner[mesh.position_ids[v as usize] as usize];
-                    *o = if *o == u32::MAX || *o == g as u32 { g as u32 } else { SHARED };
-                }
-            }
-        }
+        // Positions used by two groups are locked.
+        let owner = owners(mesh, parts, refs);
+        let shared = |p: u32| owner[p as usize].load(Relaxed) == SHARED;
         let always_locked = &self.always_locked;
         let kept = |p: u32| always_locked[p as usize] & (CELL_BORDER | lock) != 0;
         let locked = |v: u32| {
             let p = mesh.position_ids[v as usize];
-            owner[p as usize] == SHARED || kept(p)
+            shared(p) || kept(p)
         };
-        let chords = Chords::new(parts, refs, &mesh.position_ids, |p| owner[p as usize] == SHARED);
+        let chords = Chords::new(parts, refs, &mesh.position_ids, shared);
         let free = |e: u64| chords.free(e, kept);
         let first = Locks { vertex: &locked, chord: &free };
         let mut results: Vec<Option<Simplified>> =
@@ -511,6 +505,24 @@ fn locks_of(positions: usize, runs: impl Iterator<Item = (u64, usize, usize)>) -
     locked
 }
 
+/// Per position id, the group of `parts` (lists of indices into `refs`, the clusters'
+/// triangles) that uses it, [`SHARED`] where two or more do, `u32::MAX` where none does. Groups
+/// mark their positions side by side: a position's final mark does not depend on the order
+/// (a second group's mark makes it shared, and shared stays).
+fn owners(mesh: &WeldedMesh, parts: &[Vec<u32>], refs: &[&[u32]]) -> Vec<AtomicU32> {
+    let owner: Vec<AtomicU32> = (0..mesh.position_count).map(|_| AtomicU32::new(u32::MAX)).collect();
+    parts.par_iter().enumerate().for_each(|(g, part)| {
+        let g = g as u32;
+        for &v in part.iter().flat_map(|&c| refs[c as usize]) {
+            let o = &owner[mesh.position_ids[v as usize] as usize];
+            let mark = |now: u32| (now != g && now != SHARED).then_some(if now == u32::MAX { g } else { SHARED });
+            // A failed exchange re-reads the mark; it ends at `g` or SHARED.
+            let _ = o.fetch_update(Relaxed, Relaxed, mark);
+        }
+    });
+    owner
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -558,5 +570,32 @@ mod tests {
         let mut unmarked = clusters.clone();
         unmarked[0].open.iter_mut().for_each(|m| *m = 0);
         assert!(always_locked(&mesh, &unmarked).iter().any(|&l| l & CELL_BORDER != 0));
+    }
+
+    #[test]
+    fn positions_of_two_groups_are_shared_on_any_thread_count() {
+        let mesh = finned_strip();
+        let id = |x: usize, y: usize| {
+            mesh.position_ids[mesh.positions.iter().position(|p| *p == [x as f32, y as f32, 0.0]).unwrap()]
+        };
+        // Clusters: the strip's quads one by one (two triangles each) and the fin.
+        let quads: Vec<&[u32]> = mesh.indices.chunks(6).collect();
+        let parts = vec![vec![0, 1], vec![2], vec![3, 4, 5]];
+        let expected = |owner: &[AtomicU32]| {
+            let mark = |p: u32| owner[p as usize].load(Relaxed);
+            // Column 1 is inside group 0, columns 2 and 3 are group borders.
+            assert_eq!((mark(id(1, 0)), mark(id(1, 1))), (0, 0));
+            assert_eq!((mark(id(2, 0)), mark(id(3, 1))), (SHARED, SHARED));
+            assert_eq!((mark(id(5, 0)), mark(id(0, 1))), (2, 0));
+            owner.iter().map(|o| o.load(Relaxed)).collect::<Vec<_>>()
+        };
+        let marks: Vec<Vec<u32>> = [1, 3]
+            .map(|threads| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                expected(&pool.install(|| owners(&mesh, &parts, &quads)))
+            })
+            .into();
+        assert_eq!(marks[0], marks[1]);
+        assert!(marks[0].iter().all(|&m| m != u32::MAX), "every position is used");
     }
 }

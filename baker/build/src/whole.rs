@@ -39,9 +39,8 @@ pub fn build_whole<O: DagOutput>(
         || level0(&welded, settings, &edges.odd(), &order),
     );
     drop(order);
-    let locked = edges.locked(&welded);
+    let mut builder = Builder::with_original(&welded, settings, clusters, 0, (original, Some(&edges)));
     drop(edges);
-    let mut builder = Builder::with_original(&welded, settings, clusters, 0, (original, Some(locked)));
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
     builder.build_to_root(progress);
