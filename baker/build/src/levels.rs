@@ -13,12 +13,12 @@ use crate::error::BakeError;
 use crate::open;
 use crate::partition::{cluster_graph, one_group, partition, triangle_order};
 use crate::progress::Progress;
-use crate::samples::{assign_owned, keep_together, merge_owned, sort_owned, Owned};
+use crate::samples::{assign_owned, keep_together, merge_owned, sort_owned, Owned, CENTROID};
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Locks, Method};
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
-use mres_geom::edges::{edge_keys, sorted_edge_keys};
+use mres_geom::edges::{edge_key, edge_keys, sorted_edge_keys};
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
@@ -57,14 +57,20 @@ struct Child {
 }
 
 /// Level-0 clusters of a welded mesh, with their own bounds; the edges of `open` (sorted
-/// position-id keys: the original's odd edges) are marked once each. `order` is the mesh's
-/// [`triangle_order`].
-pub(crate) fn level0(mesh: &WeldedMesh, settings: &BakeSettings, open: &[u64], order: &[u32]) -> Vec<BuiltCluster> {
+/// position-id keys: the original's odd edges) are marked once each. `edges` are the mesh's
+/// edges; `order` is the mesh's [`triangle_order`].
+pub(crate) fn level0(
+    mesh: &WeldedMesh,
+    settings: &BakeSettings,
+    (edges, open): (&Level0Edges, &[u64]),
+    order: &[u32],
+) -> Vec<BuiltCluster> {
     let clusters = level0_clusters(mesh, settings, order);
-    // Three serial passes over every triangle, independent of each other: side by side.
+    // Passes over every triangle, independent of each other: side by side.
+    let non_manifold = edges.non_manifold();
     let (marks, (samples, codes)) = rayon::join(
         || open::mark(mesh, &clusters, open),
-        || rayon::join(|| first_samples(mesh, &clusters), || triangle_codes(mesh, &clusters)),
+        || rayon::join(|| first_samples(mesh, &clusters, &non_manifold), || triangle_codes(mesh, &clusters)),
     );
     clusters
         .into_par_iter()
@@ -92,31 +98,60 @@ fn triangle_codes(mesh: &WeldedMesh, clusters: &[Vec<u32>]) -> Vec<Vec<u32>> {
 }
 
 /// Per triangle of `clusters`, the level-0 samples it owns (see `samples::Samples`): its
-/// centroid, and each corner and edge midpoint on the first triangle that uses that position or
-/// edge, so that a shared point is measured once per level.
-fn first_samples(mesh: &WeldedMesh, clusters: &[Vec<u32>]) -> Vec<Vec<u8>> {
-    let mut corner_seen = vec![false; mesh.position_count];
-    let mut edge_seen = rustc_hash::FxHashSet::default();
-    clusters
-        .iter()
-        .map(|indices| {
-            (0..indices.len() / 3)
-                .map(|t| {
-                    let mut bits = 1u8 << 6;
-                    for (k, e) in open::triangle_edges(mesh, indices, t).into_iter().enumerate() {
-                        let p = mesh.position_ids[indices[3 * t + k] as usize] as usize;
-                        if !std::mem::replace(&mut corner_seen[p], true) {
-                            bits |= 1 << k;
-                        }
-                        if edge_seen.insert(e) {
-                            bits |= 8 << k;
-                        }
-                    }
-                    bits
-                })
-                .collect()
+/// centroid, and each corner and edge midpoint on the first triangle (in cluster order) that
+/// uses that position or edge, so that a shared point is measured once per level.
+/// `non_manifold`: the mesh's edges used three times or more, sorted.
+///
+/// Side by side: a position's first use is the least of its corners' places (an atomic
+/// minimum, the same for any order); an edge used twice within one cluster and nowhere else
+/// (most edges) is decided in its cluster, and only the rest (cluster borders, open and
+/// non-manifold edges) in one pass in cluster order, where a set of every edge was the level's
+/// longest serial pass.
+fn first_samples(mesh: &WeldedMesh, clusters: &[Vec<u32>], non_manifold: &[u64]) -> Vec<Vec<u8>> {
+    let id = |v: u32| mesh.position_ids[v as usize];
+    let starts: Vec<usize> = clusters.iter().scan(0, |at, c| Some(std::mem::replace(at, *at + c.len()))).collect();
+    let first_corner: Vec<AtomicU32> = (0..mesh.position_count).map(|_| AtomicU32::new(u32::MAX)).collect();
+    clusters.par_iter().zip(&starts).for_each(|(indices, &start)| {
+        for (s, &v) in indices.iter().enumerate() {
+            first_corner[id(v) as usize].fetch_min((start + s) as u32, Relaxed);
+        }
+    });
+    let mut local: Vec<(Vec<u8>, Vec<_>)> = clusters
+        .par_iter()
+        .zip(&starts)
+        .map(|(indices, &start)| {
+            let mut bits = vec![CENTROID; indices.len() / 3];
+            for (s, &v) in indices.iter().enumerate() {
+                if first_corner[id(v) as usize].load(Relaxed) == (start + s) as u32 {
+                    bits[s / 3] |= 1 << (s % 3);
+                }
+            }
+            let key = |s: usize| edge_key(id(indices[s]), id(indices[s - s % 3 + (s + 1) % 3]));
+            let mut edges: Vec<(u64, u32)> = (0..indices.len()).map(|s| (key(s), s as u32)).collect();
+            edges.sort_unstable();
+            let mut rest = Vec::new();
+            for run in edges.chunk_by(|a, b| a.0 == b.0) {
+                if run.len() == 2 && non_manifold.binary_search(&run[0].0).is_err() {
+                    bits[run[0].1 as usize / 3] |= 8 << (run[0].1 % 3);
+                } else {
+                    rest.extend_from_slice(run);
+                }
+            }
+            // In the cluster's order, for the pass below.
+            rest.sort_unstable_by_key(|e| e.1);
+            (bits, rest)
         })
-        .collect()
+        .collect();
+    let mut edge_seen = rustc_hash::FxHashSet::default();
+    edge_seen.reserve(local.iter().map(|l| l.1.len()).sum());
+    for (bits, rest) in &mut local {
+        for &(e, s) in rest.iter() {
+            if edge_seen.insert(e) {
+                bits[s as usize / 3] |= 8 << (s % 3);
+            }
+        }
+    }
+    local.into_iter().map(|l| l.0).collect()
 }
 
 /// The level loop over one welded mesh: group the pending clusters, simplify each group with
@@ -141,26 +176,42 @@ pub(crate) struct Builder<'a> {
     /// The level the next groups get.
     pub level: u32,
     pub stats: BuildStats,
+    /// The first level's groups where the caller made them ([`Prepared::parts`]).
+    parts: Option<Vec<Vec<u32>>>,
+}
+
+/// What a caller of [`Builder::with_original`] made beforehand, side by side with the level-0
+/// clusters: each is made by the builder where missing.
+#[derive(Default)]
+pub(crate) struct Prepared<'e> {
+    /// The whole level-0 surface (`Original::new`), where errors are measured.
+    pub original: Option<Original>,
+    /// The mesh's sorted edges, for the positions always locked ([`Level0Edges::locked`], for
+    /// level-0 clusters of a whole mesh).
+    pub edges: Option<&'e Level0Edges>,
+    /// The part sizes ([`part_sizes`]), where errors are measured.
+    pub part_size: Option<Vec<f32>>,
+    /// The first level's groups of all the clusters ([`groups`]).
+    pub parts: Option<Vec<Vec<u32>>>,
 }
 
 impl<'a> Builder<'a> {
     /// A builder whose pending clusters are `clusters` (triangles into `mesh`); new groups
     /// start at `level`.
     pub fn new(mesh: &'a WeldedMesh, settings: &'a BakeSettings, clusters: Vec<BuiltCluster>, level: u32) -> Self {
-        Self::with_original(mesh, settings, clusters, level, (None, None))
+        Self::with_original(mesh, settings, clusters, level, Prepared::default())
     }
 
-    /// [`Builder::new`] with the whole level-0 surface already built where the caller has it
-    /// (`Original::new`, made while the level-0 clusters were), and the mesh's sorted edges
-    /// where it has them, for the positions always locked ([`Level0Edges::locked`], for
-    /// level-0 clusters of a whole mesh).
+    /// [`Builder::new`] with what the caller made while the level-0 clusters were (see
+    /// [`Prepared`]); what it lacks is made here.
     pub fn with_original(
         mesh: &'a WeldedMesh,
         settings: &'a BakeSettings,
         clusters: Vec<BuiltCluster>,
         level: u32,
-        (original, edges): (Option<Original>, Option<&Level0Edges>),
+        prepared: Prepared,
     ) -> Self {
+        let Prepared { original, edges, part_size, parts } = prepared;
         let from_level0 = clusters.iter().all(|c| c.own_group == NO_GROUP && !c.owned.is_empty());
         let measured = settings.error_bound == ErrorBound::Measured;
         // Independent passes over the whole mesh, two of them serial: side by side.
@@ -171,7 +222,8 @@ impl<'a> Builder<'a> {
             },
             || {
                 let locked = || edges.map_or_else(|| always_locked(mesh, &clusters), |e| e.locked(mesh));
-                rayon::join(locked, || if measured { part_sizes(mesh) } else { Vec::new() })
+                let sizes = || part_size.unwrap_or_else(|| if measured { part_sizes(mesh) } else { Vec::new() });
+                rayon::join(locked, sizes)
             },
         );
         let pending = (0..clusters.len()).collect();
@@ -187,6 +239,7 @@ impl<'a> Builder<'a> {
             pending,
             level,
             stats,
+            parts,
         }
     }
 
@@ -202,10 +255,12 @@ impl<'a> Builder<'a> {
             return false;
         }
         let clusters = &self.clusters;
-        let refs: Vec<&[u32]> = self.pending.iter().map(|&c| clusters[c].indices.as_slice()).collect();
-        let centers: Vec<[f32; 3]> = self.pending.iter().map(|&c| clusters[c].own_sphere.center).collect();
-        let graph = cluster_graph(&refs, &self.mesh.position_ids, &centers);
-        let mut parts = partition(&graph, self.settings.group_size as usize);
+        let pending = || self.pending.iter().map(|&c| &clusters[c]);
+        let refs: Vec<&[u32]> = pending().map(|c| c.indices.as_slice()).collect();
+        let mut parts = match self.parts.take() {
+            Some(parts) => parts,
+            None => groups(self.mesh, pending(), self.settings),
+        };
         let mut results = self.simplify_parts(&parts, &refs, NON_MANIFOLD);
         if results.iter().all(Option::is_none) {
             // Stuck everywhere: unlock the non-manifold edges, and take a small top whole
@@ -484,6 +539,11 @@ impl Level0Edges {
         open::odd_of(&self.keys)
     }
 
+    /// The edges used three times or more, sorted.
+    pub fn non_manifold(&self) -> Vec<u64> {
+        self.keys.chunk_by(|a, b| a == b).filter(|r| r.len() >= 3).map(|r| r[0]).collect()
+    }
+
     /// [`always_locked`] of level-0 clusters that together hold every triangle of `mesh` and
     /// mark its odd edges once each (`level0`): an edge's uses less its marks are then
     /// always even, so no position is on a cell border, and the positions of edges used three
@@ -503,6 +563,19 @@ fn locks_of(positions: usize, runs: impl Iterator<Item = (u64, usize, usize)>) -
         locked[(key & 0xffff_ffff) as usize] |= why;
     }
     locked
+}
+
+/// The groups of `clusters` for one level: METIS on their graph (see [`crate::partition`]),
+/// as lists of indices into `clusters`.
+pub(crate) fn groups<'c>(
+    mesh: &WeldedMesh,
+    clusters: impl Iterator<Item = &'c BuiltCluster> + Clone,
+    settings: &BakeSettings,
+) -> Vec<Vec<u32>> {
+    let refs: Vec<&[u32]> = clusters.clone().map(|c| c.indices.as_slice()).collect();
+    let centers: Vec<[f32; 3]> = clusters.map(|c| c.own_sphere.center).collect();
+    let graph = cluster_graph(&refs, &mesh.position_ids, &centers);
+    partition(&graph, settings.group_size as usize)
 }
 
 /// Per position id, the group of `parts` (lists of indices into `refs`, the clusters'
@@ -558,7 +631,7 @@ mod tests {
     fn level0_locks_from_the_sorted_edges_match_the_clusters() {
         let mesh = finned_strip();
         let edges = Level0Edges::new(&mesh);
-        let clusters = level0(&mesh, &BakeSettings::default(), &edges.odd(), &triangle_order(&mesh));
+        let clusters = level0(&mesh, &BakeSettings::default(), (&edges, &edges.odd()), &triangle_order(&mesh));
         let locked = edges.locked(&mesh);
         assert_eq!(locked, always_locked(&mesh, &clusters));
         // The fin's edge is non-manifold at both ends; nothing is a cell border.
@@ -597,5 +670,39 @@ mod tests {
             .into();
         assert_eq!(marks[0], marks[1]);
         assert!(marks[0].iter().all(|&m| m != u32::MAX), "every position is used");
+    }
+
+    #[test]
+    fn shared_samples_go_to_their_first_triangle() {
+        let mesh = finned_strip();
+        let id = |v: u32| mesh.position_ids[v as usize];
+        // The serial rule: the first triangle in cluster order that uses a position or edge.
+        let reference = |clusters: &[Vec<u32>]| -> Vec<Vec<u8>> {
+            let (mut corners, mut edges) = (std::collections::HashSet::new(), std::collections::HashSet::new());
+            let mut bits = |t: &[u32]| {
+                (0..3).fold(CENTROID, |b, k| {
+                    let corner = u8::from(corners.insert(id(t[k]))) << k;
+                    let edge = u8::from(edges.insert(edge_key(id(t[k]), id(t[(k + 1) % 3])))) << (3 + k);
+                    b | corner | edge
+                })
+            };
+            clusters.iter().map(|c| c.chunks_exact(3).map(&mut bits).collect()).collect()
+        };
+        let quads: Vec<&[u32]> = mesh.indices.chunks(6).collect();
+        let edges = Level0Edges::new(&mesh);
+        // The fin's edge is used by quads 1 and 2 as well: a cluster holding both uses only
+        // must leave it to the fin's earlier cluster; the other clusters share borders.
+        let fin = quads[5].to_vec();
+        let splits = [
+            vec![fin.clone(), [&quads[1][..3], &quads[2][3..]].concat(), [quads[0], quads[3], quads[4]].concat()],
+            vec![quads[0..5].concat(), fin.clone()],
+            vec![quads[4].to_vec(), quads[2].to_vec(), fin, quads[0].to_vec(), quads[1].to_vec(), quads[3].to_vec()],
+        ];
+        for clusters in &splits {
+            let got = first_samples(&mesh, clusters, &edges.non_manifold());
+            assert_eq!(got, reference(clusters));
+            let owned = |bit: u8| got.iter().flatten().filter(|&&b| b & bit != 0).count();
+            assert_eq!(owned(1) + owned(2) + owned(4), mesh.position_count);
+        }
     }
 }

@@ -29,8 +29,7 @@
 
 use crate::dag::{BuildStats, BuiltCluster, BuiltDag, Cell, Collected, DagOutput, Frame, StageClock, TopCluster};
 use crate::error::BakeError;
-use crate::levels::{level0, Builder};
-use crate::open;
+use crate::levels::{level0, Builder, Level0Edges};
 use crate::partition::triangle_order;
 use crate::progress::Progress;
 use crate::settings::BakeSettings;
@@ -366,15 +365,22 @@ impl ShardContext<'_> {
             point[p as usize] = welded.grid_positions[v];
         }
         let q = |p: u32| point[p as usize];
-        let open: Vec<u64> = open::odd_edges(&welded, &welded.indices)
+        let edges = Level0Edges::new(&welded);
+        let open: Vec<u64> = edges
+            .odd()
             .into_iter()
             .filter(|&e| {
                 let [a, b] = edge_ends(e);
                 global_open.contains(&grid_edge(q(a), q(b)))
             })
             .collect();
-        let cell =
-            self.levels(&welded, level0(&welded, self.settings, &open, &triangle_order(&welded)), 0, false, output)?;
+        let cell = self.levels(
+            &welded,
+            level0(&welded, self.settings, (&edges, &open), &triangle_order(&welded)),
+            0,
+            false,
+            output,
+        )?;
         Ok(Cell {
             triangles,
             welded_vertices: welded.positions.len() as u64,

@@ -2,9 +2,9 @@
 //! bounds, cut into level-0 clusters, and built level by level to the root.
 
 use crate::dag::{BuildStats, BuiltDag, Collected, DagOutput, Frame, StageClock};
-use crate::deviation::Original;
+use crate::deviation::{part_sizes, Original};
 use crate::error::BakeError;
-use crate::levels::{level0, Builder, Level0Edges};
+use crate::levels::{groups, level0, Builder, Level0Edges, Prepared};
 use crate::partition::triangle_order;
 use crate::progress::Progress;
 use crate::settings::{BakeSettings, ErrorBound};
@@ -34,12 +34,17 @@ pub fn build_whole<O: DagOutput>(
     let order = triangle_order(&welded);
     // The mesh's edges, sorted once: its open edges for the clusters, its locked positions.
     let edges = Level0Edges::new(&welded);
-    let (original, clusters) = rayon::join(
-        || measured.then(|| Original::new(&welded, &order)),
-        || level0(&welded, settings, &edges.odd(), &order),
+    // The part sizes and the first level's groups are serial passes: the one beside the
+    // level-0 clusters, the other beside the surface's parallel build.
+    let (clusters, part_size) = rayon::join(
+        || level0(&welded, settings, (&edges, &edges.odd()), &order),
+        || measured.then(|| part_sizes(&welded)),
     );
+    let (original, parts) =
+        rayon::join(|| measured.then(|| Original::new(&welded, &order)), || groups(&welded, clusters.iter(), settings));
     drop(order);
-    let mut builder = Builder::with_original(&welded, settings, clusters, 0, (original, Some(&edges)));
+    let prepared = Prepared { original, edges: Some(&edges), part_size, parts: Some(parts) };
+    let mut builder = Builder::with_original(&welded, settings, clusters, 0, prepared);
     drop(edges);
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));

@@ -14,6 +14,7 @@
 use crate::bvh::{closest_feature2, Bvh, Feature, Real, Triangle};
 use crate::edges::edge_key;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
 /// No triangle across this edge: an open border, or an edge with more than two triangles.
 const NONE: u32 = u32::MAX;
@@ -35,13 +36,19 @@ impl Neighbours {
         } else {
             edges.sort_unstable();
         }
-        let mut across = vec![[NONE; 3]; triangles];
-        for run in edges.chunk_by(|a, b| a.0 == b.0) {
-            if let [(_, a), (_, b)] = run {
-                across[*a as usize / 3][*a as usize % 3] = b / 3;
-                across[*b as usize / 3][*b as usize % 3] = a / 3;
+        // Each run of two equal keys (an edge of exactly two triangles) joins its slots, side
+        // by side: a slot is in one run only, so each is written once.
+        let slots: Vec<AtomicU32> = (0..triangles * 3).map(|_| AtomicU32::new(NONE)).collect();
+        let key = |i: usize| edges.get(i).map(|e| e.0);
+        (0..edges.len()).into_par_iter().with_min_len(4096).for_each(|i| {
+            let pair = (i == 0 || key(i - 1) != key(i)) && key(i + 1) == key(i) && key(i + 2) != key(i);
+            if pair {
+                let (a, b) = (edges[i].1, edges[i + 1].1);
+                slots[a as usize].store(b / 3, Relaxed);
+                slots[b as usize].store(a / 3, Relaxed);
             }
-        }
+        });
+        let across = slots.par_chunks(3).with_min_len(4096).map(|s| [0, 1, 2].map(|k| s[k].load(Relaxed))).collect();
         Neighbours { across }
     }
 
