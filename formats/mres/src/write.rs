@@ -7,6 +7,7 @@ use super::decode;
 use super::records::{meta_checksum, ClusterHeader, ClusterRecord, GroupRecord, HeaderRecord, PageRecord};
 use super::*;
 use rayon::prelude::*;
+use std::cell::RefCell;
 use std::sync::OnceLock;
 
 /// Why a [`Dag`] cannot be written.
@@ -231,7 +232,7 @@ fn compress_pages(
     // with the page's data.
     let mut kept: Vec<OnceLock<SourceData>> = (0..pages.len()).map(|_| OnceLock::new()).collect();
     let mut frames = Vec::with_capacity(pages.len());
-    let mut freed = 0;
+    let (mut freed, mut untrimmed) = (0, 0);
     for start in (0..pages.len()).step_by(PAGE_BATCH) {
         let batch = start..(start + PAGE_BATCH).min(pages.len());
         let compressed: Vec<Vec<u8>> = batch
@@ -257,14 +258,17 @@ fn compress_pages(
         // Pages before `freed` are freed; every page whose last reader is done goes now.
         for p in (freed..batch.end).filter(|&p| last_use[p] < batch.end) {
             for &c in members(p) {
-                encoded[c].data = Box::default();
+                untrimmed += std::mem::take(&mut encoded[c].data).len();
             }
             kept[p] = OnceLock::new();
         }
         while freed < batch.end && last_use[freed] < batch.end {
             freed += 1;
         }
-        release_freed_memory();
+        if untrimmed >= TRIM_BYTES {
+            release_freed_memory();
+            untrimmed = 0;
+        }
     }
     Ok(frames)
 }
@@ -298,6 +302,10 @@ fn encode_page_table(pages: &[PageSpan], dependencies: &[Vec<u32>], frames: &[Fr
 /// Pages compressed at a time: enough for every thread, few enough that the batch's frames
 /// and raw pages stay small.
 const PAGE_BATCH: usize = 64;
+
+/// Cluster bytes freed before they are given back ([`release_freed_memory`]): it walks the
+/// whole heap, so once per batch cost a large mesh's writer more than its batches' tails.
+const TRIM_BYTES: usize = 32 << 20;
 
 /// Gives freed heap memory back to the system. The freed clusters are many small blocks that
 /// glibc keeps for reuse, while the file grows in one large block it cannot reuse them for: so
@@ -394,11 +402,24 @@ fn compress_page(
     if decoded.ok() != Some(raw) {
         return Err(codec_bug());
     }
-    let mut out = Vec::new();
-    for stream in streams.iter().filter(|s| !s.is_empty()) {
-        out.extend_from_slice(&zstd::bulk::compress(stream, level)?);
-    }
-    Ok(out)
+    COMPRESSOR.with_borrow_mut(|cell| {
+        let zstd = match cell {
+            Some((l, zstd)) if *l == level => zstd,
+            _ => &mut cell.insert((level, zstd::bulk::Compressor::new(level)?)).1,
+        };
+        let mut out = Vec::new();
+        for stream in streams.iter().filter(|s| !s.is_empty()) {
+            out.extend_from_slice(&zstd.compress(stream)?);
+        }
+        Ok(out)
+    })
+}
+
+thread_local! {
+    /// A zstd context per thread and level, reused from stream to stream (the same frames as
+    /// a fresh one): a fresh context per stream set up and zeroed its tables every time, for
+    /// streams of a few kilobytes.
+    static COMPRESSOR: RefCell<Option<(i32, zstd::bulk::Compressor<'static>)>> = const { RefCell::new(None) };
 }
 
 /// What the pages that copy vertices of a page read of it (FORMAT.md §4.3): its vertices'
