@@ -6,6 +6,7 @@ use crate::settings::BakeSettings;
 use mres_format::{Grid, UvQuant};
 use mres_import::SourceMesh;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
 /// A welded, quantized mesh: the input of the DAG build.
 pub struct WeldedMesh {
@@ -179,46 +180,47 @@ fn weld_units(
         .collect();
     keyed.par_sort_unstable();
 
-    let mut out = WeldedMesh {
+    // Runs of equal keys are welded vertices, runs of equal grid points positions: numbered
+    // by prefix counts, so that every vertex is made side by side.
+    let starts: Vec<u32> = (0..keyed.len() as u32)
+        .into_par_iter()
+        .filter(|&i| i == 0 || keyed[i as usize - 1].0 != keyed[i as usize].0)
+        .collect();
+    let new_point = |r: usize| r == 0 || keyed[starts[r - 1] as usize].0 .0 != keyed[starts[r] as usize].0 .0;
+    let position_ids: Vec<u32> = (0..starts.len())
+        .map(new_point)
+        .scan(0u32, |count, new| {
+            *count += u32::from(new);
+            Some(*count - 1)
+        })
+        .collect();
+    let source = |r: usize| units[keyed[starts[r] as usize].1 as usize].0 as usize;
+    let vertices = 0..starts.len();
+    let grid_positions: Vec<[i32; 3]> =
+        vertices.clone().into_par_iter().map(|r| keyed[starts[r] as usize].0 .0).collect();
+    let unit_vertex: Vec<AtomicU32> = (0..units.len()).map(|_| AtomicU32::new(0)).collect();
+    vertices.clone().into_par_iter().for_each(|r| {
+        let end = starts.get(r + 1).map_or(keyed.len(), |&e| e as usize);
+        for &(_, unit) in &keyed[starts[r] as usize..end] {
+            unit_vertex[unit as usize].store(r as u32, Relaxed);
+        }
+    });
+    let out = WeldedMesh {
         grid,
         uv,
-        grid_positions: Vec::new(),
-        positions: Vec::new(),
-        position_ids: Vec::new(),
-        position_count: 0,
-        normals: rows.normals.map(|_| Vec::new()),
-        uvs: rows.uvs.map(|_| Vec::new()),
-        materials: Vec::new(),
+        positions: grid_positions.par_iter().map(|&q| grid.decode(q)).collect(),
+        grid_positions,
+        position_count: position_ids.last().map_or(0, |&p| p as usize + 1),
+        position_ids,
+        normals: rows.normals.map(|n| vertices.clone().into_par_iter().map(|r| n[source(r)]).collect()),
+        uvs: rows.uvs.map(|u| vertices.clone().into_par_iter().map(|r| u[source(r)]).collect()),
+        materials: vertices.into_par_iter().map(|r| keyed[starts[r] as usize].0 .3).collect(),
         multi_material: false,
         indices: Vec::new(),
         degenerate_dropped: 0,
         source_triangles: 0,
     };
-    let mut unit_vertex = vec![0u32; units.len()];
-    let mut previous_q = None;
-    for run in keyed.chunk_by(|a, b| a.0 == b.0) {
-        let ((q, _, _, material), first) = run[0];
-        let s = units[first as usize].0 as usize;
-        let vertex = out.grid_positions.len() as u32;
-        if previous_q != Some(q) {
-            out.position_count += 1;
-            previous_q = Some(q);
-        }
-        out.grid_positions.push(q);
-        out.positions.push(grid.decode(q));
-        out.position_ids.push(out.position_count as u32 - 1);
-        if let (Some(dst), Some(src)) = (out.normals.as_mut(), rows.normals) {
-            dst.push(src[s]);
-        }
-        if let (Some(dst), Some(src)) = (out.uvs.as_mut(), rows.uvs) {
-            dst.push(src[s]);
-        }
-        out.materials.push(material);
-        for &(_, unit) in run {
-            unit_vertex[unit as usize] = vertex;
-        }
-    }
-    (out, unit_vertex)
+    (out, unit_vertex.into_iter().map(AtomicU32::into_inner).collect())
 }
 
 /// Adds the `triangles` triangles whose corner `c` is welded vertex `vertex_of(c)`, dropping
@@ -232,7 +234,7 @@ fn add_triangles(out: &mut WeldedMesh, triangles: usize, vertex_of: impl Fn(usiz
             (p[0] != p[1] && p[1] != p[2] && p[0] != p[2]).then_some(welded)
         })
         .collect();
-    out.indices = welded.iter().flatten().flatten().copied().collect();
+    out.indices = welded.par_iter().with_min_len(4096).flat_map_iter(|t| t.iter().flatten().copied()).collect();
     out.degenerate_dropped += welded.iter().filter(|t| t.is_none()).count() as u64;
 }
 

@@ -34,14 +34,16 @@ pub fn build_whole<O: DagOutput>(
     let order = triangle_order(&welded);
     // The mesh's edges, sorted once: its open edges for the clusters, its locked positions.
     let edges = Level0Edges::new(&welded);
-    // The part sizes and the first level's groups are serial passes: the one beside the
-    // level-0 clusters, the other beside the surface's parallel build.
-    let (clusters, part_size) = rayon::join(
-        || level0(&welded, settings, (&edges, &edges.odd()), &order),
-        || measured.then(|| part_sizes(&welded)),
+    // The part sizes and the first level's groups (METIS) are serial passes: beside the
+    // surface's parallel build.
+    let ((original, part_size), (clusters, parts)) = rayon::join(
+        || rayon::join(|| measured.then(|| Original::new(&welded, &order)), || measured.then(|| part_sizes(&welded))),
+        || {
+            let clusters = level0(&welded, settings, (&edges, &edges.odd()), &order);
+            let parts = groups(&welded, clusters.iter(), settings);
+            (clusters, parts)
+        },
     );
-    let (original, parts) =
-        rayon::join(|| measured.then(|| Original::new(&welded, &order)), || groups(&welded, clusters.iter(), settings));
     drop(order);
     let prepared = Prepared { original, edges: Some(&edges), part_size, parts: Some(parts) };
     let mut builder = Builder::with_original(&welded, settings, clusters, 0, prepared);
