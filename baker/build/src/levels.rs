@@ -18,7 +18,7 @@ use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Locks, Method};
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
-use mres_geom::edges::{edge_key, edge_keys, sorted_edge_keys};
+use mres_geom::edges::{edge_keys, sorted_edge_keys};
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
@@ -126,8 +126,7 @@ fn first_samples(mesh: &WeldedMesh, clusters: &[Vec<u32>], non_manifold: &[u64])
                     bits[s / 3] |= 1 << (s % 3);
                 }
             }
-            let key = |s: usize| edge_key(id(indices[s]), id(indices[s - s % 3 + (s + 1) % 3]));
-            let mut edges: Vec<(u64, u32)> = (0..indices.len()).map(|s| (key(s), s as u32)).collect();
+            let mut edges: Vec<(u64, u32)> = edge_keys(indices, id).into_iter().zip(0..).collect();
             edges.sort_unstable();
             let mut rest = Vec::new();
             for run in edges.chunk_by(|a, b| a.0 == b.0) {
@@ -180,7 +179,7 @@ pub(crate) struct Builder<'a> {
     parts: Option<Vec<Vec<u32>>>,
 }
 
-/// What a caller of [`Builder::with_original`] made beforehand, side by side with the level-0
+/// What a caller of [`Builder::with_prepared`] made beforehand, side by side with the level-0
 /// clusters: each is made by the builder where missing.
 #[derive(Default)]
 pub(crate) struct Prepared<'e> {
@@ -199,12 +198,12 @@ impl<'a> Builder<'a> {
     /// A builder whose pending clusters are `clusters` (triangles into `mesh`); new groups
     /// start at `level`.
     pub fn new(mesh: &'a WeldedMesh, settings: &'a BakeSettings, clusters: Vec<BuiltCluster>, level: u32) -> Self {
-        Self::with_original(mesh, settings, clusters, level, Prepared::default())
+        Self::with_prepared(mesh, settings, clusters, level, Prepared::default())
     }
 
     /// [`Builder::new`] with what the caller made while the level-0 clusters were (see
     /// [`Prepared`]); what it lacks is made here.
-    pub fn with_original(
+    pub fn with_prepared(
         mesh: &'a WeldedMesh,
         settings: &'a BakeSettings,
         clusters: Vec<BuiltCluster>,
@@ -600,6 +599,7 @@ fn owners(mesh: &WeldedMesh, parts: &[Vec<u32>], refs: &[&[u32]]) -> Vec<AtomicU
 mod tests {
     use super::*;
     use crate::weld::weld;
+    use mres_geom::edges::edge_key;
     use mres_import::SourceMesh;
 
     /// A strip of quads (open rim) with a fin: a third triangle on one inner edge.

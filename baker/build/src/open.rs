@@ -10,17 +10,12 @@
 //! (`simplify::EdgeCounts`).
 
 use crate::weld::WeldedMesh;
-use mres_geom::edges::{edge_key, sorted_edge_keys};
+use mres_geom::edges::edge_key;
 
 /// The position-id edge keys of triangle `t` of `indices`, edge k from corner k.
 pub fn triangle_edges(mesh: &WeldedMesh, indices: &[u32], t: usize) -> [u64; 3] {
     let p = |k: usize| mesh.position_ids[indices[3 * t + k] as usize];
     [edge_key(p(0), p(1)), edge_key(p(1), p(2)), edge_key(p(2), p(0))]
-}
-
-/// The edges `indices` uses an odd number of times, sorted.
-pub fn odd_edges(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
-    odd_of(&sorted_edge_keys(indices, |v| mesh.position_ids[v as usize]))
 }
 
 /// The keys that occur an odd number of times in sorted `keys`, sorted.
@@ -77,6 +72,7 @@ mod tests {
     use super::*;
     use crate::settings::BakeSettings;
     use crate::weld::weld;
+    use mres_geom::edges::sorted_edge_keys;
     use mres_import::SourceMesh;
 
     /// Two triangles sharing an edge (a quad): its four rim edges are open, the diagonal not.
@@ -91,7 +87,7 @@ mod tests {
             degenerate_dropped: 0,
         };
         let w = weld(&mesh, &BakeSettings::default()).unwrap();
-        let needed = odd_edges(&w, &w.indices);
+        let needed = odd_of(&sorted_edge_keys(&w.indices, |v| w.position_ids[v as usize]));
         assert_eq!(needed.len(), 4);
         // Split into two one-triangle clusters: each marks its two rim edges, not the diagonal.
         let clusters = vec![w.indices[..3].to_vec(), w.indices[3..].to_vec()];

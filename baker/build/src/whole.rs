@@ -46,7 +46,7 @@ pub fn build_whole<O: DagOutput>(
     );
     drop(order);
     let prepared = Prepared { original, edges: Some(&edges), part_size, parts: Some(parts) };
-    let mut builder = Builder::with_original(&welded, settings, clusters, 0, prepared);
+    let mut builder = Builder::with_prepared(&welded, settings, clusters, 0, prepared);
     drop(edges);
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
