@@ -23,6 +23,7 @@ use mres_geom::edges::edge_key;
 use mres_geom::parts::{diagonals, UnionFind};
 use mres_geom::walk::Surface;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
 /// The sampled distance is scaled by this before it is added: the samples (vertices, edge
 /// midpoints, centroids) miss the largest distance between them, and the next level's samples
@@ -190,6 +191,13 @@ pub struct Original {
     surface: Surface<f32>,
     /// Per triangle of `surface`, its index in the mesh's `indices`.
     source: Vec<u32>,
+    /// Per position id, the first triangle of `surface` using it: where the walk to an output
+    /// triangle's samples starts. An output corner is a level-0 vertex, so the samples lie
+    /// within the output triangle's size of there; the previous sample's triangle, where walks
+    /// started before, is often dozens of triangles away at the upper levels (the output
+    /// triangles the members already had are not measured, so the measured ones lie apart), and
+    /// a walk that runs out of steps leaves the query to the hierarchy, about 20 times its cost.
+    at_position: Vec<u32>,
     /// Bound on the f32 rounding of a distance at these coordinates.
     slack: f64,
 }
@@ -218,7 +226,13 @@ impl Original {
         // Rounding of the subtractions, products and sums: a few dozen ulps of the largest
         // coordinate (far below the position grid's step).
         let slack = 64.0 * f32::EPSILON as f64 * largest as f64;
-        Original { surface: Surface::new(tris, &ids), source, slack }
+        // The first triangle of each position, in surface order: the same for any thread count.
+        let at_position: Vec<AtomicU32> = (0..mesh.position_count).map(|_| AtomicU32::new(u32::MAX)).collect();
+        ids.par_iter().enumerate().with_min_len(4096).for_each(|(s, &p)| {
+            at_position[p as usize].fetch_min(s as u32 / 3, Relaxed);
+        });
+        let at_position = at_position.into_iter().map(AtomicU32::into_inner).collect();
+        Original { surface: Surface::new(tris, &ids), source, at_position, slack }
     }
 
     /// Output → original for `output` (welded ids) with sample bits `duty`, from the bound
@@ -235,9 +249,15 @@ impl Original {
         let absolute = |v: u32| mesh.positions[v as usize];
         let id = |v: u32| mesh.position_ids[v as usize];
         let mut far = Far::default();
-        let mut hint = usize::MAX;
         for (t, &duty) in output.chunks_exact(3).zip(duty) {
+            if duty == 0 {
+                continue;
+            }
             let tri = [absolute(t[0]), absolute(t[1]), absolute(t[2])];
+            // From a level-0 triangle at the corner nearest the first sample: edge k's midpoint
+            // (bit 3 + k) starts at corner k, the centroid (bit 6) at corner 0.
+            let corner = (duty.trailing_zeros() as usize).saturating_sub(3) % 3;
+            let mut hint = self.at_position[id(t[corner]) as usize] as usize;
             for p in set_bits(duty).map(|b| sample_point(&tri, b)) {
                 let d = ((worst / SAMPLING_MARGIN - self.slack).max(0.0)) as f32;
                 let enough = d * d;
@@ -957,6 +977,68 @@ mod tests {
         // The simplifier's estimate wins when larger; an unchanged group measures 0.
         assert_eq!(group_error(&w, &input, &output, &sizes, 0.0, 2.0), 2.0);
         assert_eq!(group_error(&w, &input, &input, &sizes, 0.0, 0.0), 0.0);
+    }
+
+    /// A bumpy `n` × `n` grid (welded) and a coarse output over every other vertex of it.
+    fn bumpy(n: u32) -> (WeldedMesh, Vec<u32>) {
+        let at = |x: u32, y: u32| y * (n + 1) + x;
+        let height = |x: u32, y: u32| ((x * 7 + y * 3) % 5) as f32 * 0.15;
+        let positions = (0..=n).flat_map(|y| (0..=n).map(move |x| [x as f32, y as f32, height(x, y)])).collect();
+        let quads = |step: u32| {
+            let mut indices = Vec::new();
+            for y in (0..n).step_by(step as usize) {
+                for x in (0..n).step_by(step as usize) {
+                    let (a, b) = (at(x, y), at(x + step, y));
+                    let (c, d) = (at(x + step, y + step), at(x, y + step));
+                    indices.extend([a, b, c, a, c, d]);
+                }
+            }
+            indices
+        };
+        let indices = quads(1);
+        let triangles = indices.len() / 3;
+        let mesh = SourceMesh {
+            positions,
+            uvs: None,
+            normals: None,
+            indices,
+            materials: vec![0; triangles],
+            degenerate_dropped: 0,
+        };
+        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        // Welded ids of the source's vertices: the nearest welded position (weld snaps them).
+        let d2 = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>();
+        let near = |v: u32, u: u32| d2(w.positions[u as usize], mesh.positions[v as usize]);
+        let id = |v: u32| (0..w.positions.len() as u32).min_by(|&a, &b| near(v, a).total_cmp(&near(v, b))).unwrap();
+        let output = quads(2).into_iter().map(id).collect();
+        (w, output)
+    }
+
+    #[test]
+    fn the_original_surface_measure_is_exact_from_any_start() {
+        let (w, output) = bumpy(8);
+        let original = Original::new(&w, &crate::partition::triangle_order(&w));
+        // Each position's starting triangle uses it.
+        for (p, &t) in original.at_position.iter().enumerate() {
+            let corners = original.corners(&w, t as usize);
+            assert!(corners.iter().any(|&v| w.position_ids[v as usize] as usize == p), "position {p}");
+        }
+        // Every output edge midpoint and centroid, against every level-0 triangle.
+        let tris: Vec<Triangle<f32>> =
+            w.indices.chunks_exact(3).map(|t| [0, 1, 2].map(|k| w.positions[t[k] as usize])).collect();
+        let mut exact = 0.0f64;
+        for t in output.chunks_exact(3) {
+            let tri = [0, 1, 2].map(|k| w.positions[t[k] as usize]);
+            for b in 3..7 {
+                let p = sample_point(&tri, b);
+                let d2 = tris.iter().map(|q| mres_geom::bvh::point_triangle_distance2(p, q)).fold(f32::MAX, f32::min);
+                exact = exact.max((d2 as f64).sqrt());
+            }
+        }
+        assert!(exact > 0.1, "the coarse output misses the bumps: {exact}");
+        let duty = vec![0x78u8; output.len() / 3];
+        let (worst, _) = original.measure(&w, (&output, &duty), 0.0, None);
+        assert!(worst >= exact && worst <= exact + 1e-4, "{worst} vs {exact}");
     }
 
     #[test]

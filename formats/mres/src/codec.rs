@@ -432,39 +432,62 @@ pub(crate) fn source_keys<'a>(sources: impl IntoIterator<Item = &'a Quantized>) 
     sources.into_iter().flat_map(|c| (0..c.positions.len()).map(move |v| key(c, v))).collect()
 }
 
-/// One source page's vertices by key: every (key, number in the page) pair, sorted, so that
-/// the numbers of equal vertices are one run in ascending order, and where each key's run
-/// starts. Made once per source page (a page is the source of several others) rather than once
-/// per page that reads it; a page looks up each of its new vertices in every source, so a
-/// lookup is a hash probe, not a binary search (which cost several cache misses each).
+/// One source page's vertices by key: the numbers of equal vertices together, ascending, and
+/// where each key's numbers lie. Made once per source page (a page is the source of several
+/// others) rather than once per page that reads it; a page looks up each of its new vertices in
+/// every source, so a lookup is one hash probe. Built by counting, not sorting: the keys are
+/// numbered by first appearance, and each key's numbers are laid out in the order they come.
 pub(crate) struct SortedKeys {
-    entries: Vec<(VertexKey, u32)>,
-    start: rustc_hash::FxHashMap<VertexKey, u32>,
+    /// Every vertex's number in the page, grouped by key.
+    numbers: Vec<u32>,
+    /// Per key, where its numbers start in `numbers` and how many there are.
+    runs: rustc_hash::FxHashMap<VertexKey, (u32, u32)>,
 }
 
 impl SortedKeys {
     /// The index of one source page's vertex `keys` (in its own numbering).
     pub(crate) fn new(keys: &[VertexKey]) -> SortedKeys {
-        let mut entries: Vec<(VertexKey, u32)> = keys.iter().enumerate().map(|(u, &k)| (k, u as u32)).collect();
-        entries.sort_unstable();
-        let mut start = rustc_hash::FxHashMap::default();
-        start.reserve(entries.len());
-        for (i, (k, _)) in entries.iter().enumerate().rev() {
-            start.insert(*k, i as u32);
+        let mut runs: rustc_hash::FxHashMap<VertexKey, (u32, u32)> = rustc_hash::FxHashMap::default();
+        runs.reserve(keys.len());
+        // Count each key's vertices, then give each key its range (in first-appearance order).
+        let mut group = Vec::with_capacity(keys.len());
+        let mut counts: Vec<u32> = Vec::new();
+        for k in keys {
+            let next = counts.len() as u32;
+            let g = runs.entry(*k).or_insert((next, 0)).0;
+            if g == next {
+                counts.push(0);
+            }
+            counts[g as usize] += 1;
+            group.push(g);
         }
-        SortedKeys { entries, start }
+        let mut starts = Vec::with_capacity(counts.len());
+        let mut at = 0u32;
+        for &c in &counts {
+            starts.push(at);
+            at += c;
+        }
+        let mut fill = starts.clone();
+        let mut numbers = vec![0u32; keys.len()];
+        for (u, &g) in group.iter().enumerate() {
+            numbers[fill[g as usize] as usize] = u as u32;
+            fill[g as usize] += 1;
+        }
+        for run in runs.values_mut() {
+            *run = (starts[run.0 as usize], counts[run.0 as usize]);
+        }
+        SortedKeys { numbers, runs }
     }
 
     /// How many vertices it has.
     fn len(&self) -> u32 {
-        self.entries.len() as u32
+        self.numbers.len() as u32
     }
 
     /// The numbers of the vertices equal to `k`, ascending.
     fn run(&self, k: &VertexKey) -> impl DoubleEndedIterator<Item = u32> + Clone + '_ {
-        let first = self.start.get(k).map_or(self.entries.len(), |&i| i as usize);
-        let run = &self.entries[first..];
-        run[..run.iter().take_while(|(e, _)| e == k).count()].iter().map(|&(_, u)| u)
+        let (start, count) = self.runs.get(k).copied().unwrap_or((0, 0));
+        self.numbers[start as usize..(start + count) as usize].iter().copied()
     }
 }
 
