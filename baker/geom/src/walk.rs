@@ -26,11 +26,25 @@ pub struct Neighbours {
 
 impl Neighbours {
     /// The neighbours of the triangles whose corners are `corners` (three per triangle):
-    /// position ids, so that copies of a vertex on an attribute seam join.
+    /// position ids, so that copies of a vertex on an attribute seam join. An edge joins the
+    /// two triangles that use it where exactly two edge slots in all have its key; any other
+    /// count leaves its slots without a neighbour.
     pub fn new(corners: &[u32]) -> Neighbours {
+        let positions = corners.iter().copied().max().map_or(0, |m| m as usize + 1);
+        // Dense ids (a whole mesh's): each edge is found among its first end's triangles,
+        // without sorting every edge. Sparse ids (a group's, numbered over the whole mesh):
+        // the sort, which needs no table over every id.
+        if corners.len() >= DENSE_MIN && positions <= corners.len() {
+            Neighbours::by_position(corners, positions)
+        } else {
+            Neighbours::by_sort(corners)
+        }
+    }
+
+    /// [`Neighbours::new`] by sorting every edge slot by key and pairing runs of two.
+    fn by_sort(corners: &[u32]) -> Neighbours {
         let triangles = corners.len() / 3;
-        let mut edges: Vec<(u64, u32)> =
-            (0..triangles * 3).map(|s| (edge_key(corners[s], corners[s - s % 3 + (s + 1) % 3]), s as u32)).collect();
+        let mut edges: Vec<(u64, u32)> = (0..triangles * 3).map(|s| (slot_key(corners, s), s as u32)).collect();
         if edges.len() > 64 * 1024 {
             edges.par_sort_unstable();
         } else {
@@ -49,6 +63,60 @@ impl Neighbours {
             }
         });
         let across = slots.par_chunks(3).with_min_len(4096).map(|s| [0, 1, 2].map(|k| s[k].load(Relaxed))).collect();
+        Neighbours { across }
+    }
+
+    /// [`Neighbours::new`] for ids below `positions`: each position's triangles listed once
+    /// (counted, then filled in triangle order), and each edge slot's key counted among the
+    /// edges of its smaller end's triangles. The same result as [`Neighbours::by_sort`].
+    fn by_position(corners: &[u32], positions: usize) -> Neighbours {
+        // A triangle is listed once under each distinct position of its corners.
+        let distinct = |t: &[u32], k: usize| (0..k).all(|j| t[j] != t[k]);
+        let mut start = vec![0u32; positions + 1];
+        for t in corners.chunks_exact(3) {
+            for k in (0..3).filter(|&k| distinct(t, k)) {
+                start[t[k] as usize + 1] += 1;
+            }
+        }
+        for p in 0..positions {
+            start[p + 1] += start[p];
+        }
+        let mut fill = start.clone();
+        let mut listed = vec![0u32; start[positions] as usize];
+        for (i, t) in corners.chunks_exact(3).enumerate() {
+            for k in (0..3).filter(|&k| distinct(t, k)) {
+                let at = &mut fill[t[k] as usize];
+                listed[*at as usize] = i as u32;
+                *at += 1;
+            }
+        }
+        let across = (0..corners.len() / 3)
+            .into_par_iter()
+            .with_min_len(4096)
+            .map(|i| {
+                std::array::from_fn(|k| {
+                    let key = slot_key(corners, 3 * i + k);
+                    let end = (key >> 32) as usize;
+                    // The slots with this key among the triangles at its smaller end: every one.
+                    let mut count = 0;
+                    let mut other = NONE;
+                    for &u in &listed[start[end] as usize..start[end + 1] as usize] {
+                        for j in 0..3 {
+                            let s = 3 * u as usize + j;
+                            if s != 3 * i + k && slot_key(corners, s) == key {
+                                count += 1;
+                                other = u;
+                            }
+                        }
+                    }
+                    if count == 1 {
+                        other
+                    } else {
+                        NONE
+                    }
+                })
+            })
+            .collect();
         Neighbours { across }
     }
 
@@ -84,6 +152,15 @@ impl Neighbours {
         }
         best
     }
+}
+
+/// Fewest corners for which [`Neighbours::new`] pairs edges by position rather than by sorting.
+const DENSE_MIN: usize = 64 * 1024;
+
+/// The edge key of slot `s` of `corners`: edge `s % 3` of triangle `s / 3`, from its corner
+/// `s % 3` to the next.
+fn slot_key(corners: &[u32], s: usize) -> u64 {
+    edge_key(corners[s], corners[s - s % 3 + (s + 1) % 3])
 }
 
 /// Triangles with their hierarchy and neighbours: nearest-triangle queries that walk from a
@@ -172,6 +249,27 @@ mod tests {
         let mut more = corners.clone();
         more.extend_from_slice(&[0, 5, 17]);
         assert_eq!(Neighbours::new(&more).across[0][2], NONE);
+    }
+
+    #[test]
+    fn pairing_by_position_matches_the_sort() {
+        // A grid with extras: a third triangle on an edge (non-manifold), a triangle twice,
+        // and triangles with a repeated corner (an edge from a position to itself).
+        let (_, mut corners) = grid(6);
+        corners.extend_from_slice(&[0, 8, 30, 9, 10, 17, 9, 10, 17, 3, 3, 4, 4, 3, 3, 20, 21, 20]);
+        let mut state = 11u64;
+        for _ in 0..40 {
+            // Random triangles over the same positions, some sharing edges with the grid.
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let a = (state >> 33) as u32 % 49;
+            corners.extend_from_slice(&[a, (a + 1) % 49, (a + 7) % 49]);
+        }
+        let positions = *corners.iter().max().unwrap() as usize + 1;
+        let (sorted, listed) = (Neighbours::by_sort(&corners), Neighbours::by_position(&corners, positions));
+        assert_eq!(sorted.across, listed.across);
+        assert!(
+            listed.across.iter().flatten().any(|&t| t != NONE) && listed.across.iter().flatten().any(|&t| t == NONE)
+        );
     }
 
     #[test]
