@@ -12,7 +12,7 @@
 //! crates walk planar Delaunay meshes), so this is written here.
 
 use crate::bvh::{closest_feature2, Bvh, Feature, Real, Triangle};
-use crate::edges::edge_key;
+use crate::edges::{edge_ends, edge_key};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
@@ -96,11 +96,17 @@ impl Neighbours {
             .map(|i| {
                 std::array::from_fn(|k| {
                     let key = slot_key(corners, 3 * i + k);
-                    let end = (key >> 32) as usize;
+                    let [end, far] = edge_ends(key);
+                    let (from, to) = (start[end as usize] as usize, start[end as usize + 1] as usize);
                     // The slots with this key among the triangles at its smaller end: every one.
                     let mut count = 0;
                     let mut other = NONE;
-                    for &u in &listed[start[end] as usize..start[end + 1] as usize] {
+                    for &u in &listed[from..to] {
+                        let c = &corners[3 * u as usize..3 * u as usize + 3];
+                        // Only a triangle at the other end too has such a slot.
+                        if c[0] != far && c[1] != far && c[2] != far {
+                            continue;
+                        }
                         for j in 0..3 {
                             let s = 3 * u as usize + j;
                             if s != 3 * i + k && slot_key(corners, s) == key {
