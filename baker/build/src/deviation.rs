@@ -191,12 +191,13 @@ pub struct Original {
     surface: Surface<f32>,
     /// Per triangle of `surface`, its index in the mesh's `indices`.
     source: Vec<u32>,
-    /// Per position id, the first triangle of `surface` using it: where the walk to an output
-    /// triangle's samples starts. An output corner is a level-0 vertex, so the samples lie
-    /// within the output triangle's size of there; the previous sample's triangle, where walks
-    /// started before, is often dozens of triangles away at the upper levels (the output
-    /// triangles the members already had are not measured, so the measured ones lie apart), and
-    /// a walk that runs out of steps leaves the query to the hierarchy, about 20 times its cost.
+    /// Per position id, the first triangle of `surface` using it: where a second walk to an
+    /// output sample starts when the walk from the previous sample's triangle does not get
+    /// within the bound. An output corner is a level-0 vertex, so the sample lies within the
+    /// output triangle's size of there; the previous sample's triangle is often dozens of
+    /// triangles away at the upper levels (the output triangles the members already had are
+    /// not measured, so the measured ones lie apart), and a query left to the hierarchy costs
+    /// about 20 walks.
     at_position: Vec<u32>,
     /// Bound on the f32 rounding of a distance at these coordinates.
     slack: f64,
@@ -249,19 +250,20 @@ impl Original {
         let absolute = |v: u32| mesh.positions[v as usize];
         let id = |v: u32| mesh.position_ids[v as usize];
         let mut far = Far::default();
+        let mut hint = usize::MAX;
         for (t, &duty) in output.chunks_exact(3).zip(duty) {
-            if duty == 0 {
-                continue;
-            }
             let tri = [absolute(t[0]), absolute(t[1]), absolute(t[2])];
-            // From a level-0 triangle at the corner nearest the first sample: edge k's midpoint
-            // (bit 3 + k) starts at corner k, the centroid (bit 6) at corner 0.
-            let corner = (duty.trailing_zeros() as usize).saturating_sub(3) % 3;
-            let mut hint = self.at_position[id(t[corner]) as usize] as usize;
-            for p in set_bits(duty).map(|b| sample_point(&tri, b)) {
+            for b in set_bits(duty) {
+                let p = sample_point(&tri, b);
                 let d = ((worst / SAMPLING_MARGIN - self.slack).max(0.0)) as f32;
                 let enough = d * d;
-                let (d2, nearest) = self.surface.within_squared(p, enough, hint, WALK_STEPS);
+                // From the previous sample's triangle (mostly near, and in the caches), else
+                // from a level-0 triangle at the sample's nearest corner (edge k's midpoint, bit
+                // 3 + k, at corner k; the centroid at corner 0), then the hierarchy.
+                let (d2, nearest) = self.surface.walk_within(p, enough, hint, WALK_STEPS).unwrap_or_else(|_| {
+                    let corner = self.at_position[id(t[b.saturating_sub(3) % 3]) as usize] as usize;
+                    self.surface.within_squared(p, enough, corner, WALK_STEPS)
+                });
                 hint = nearest;
                 if d2 > enough {
                     worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + self.slack));

@@ -67,29 +67,34 @@ impl Neighbours {
     }
 
     /// [`Neighbours::new`] for ids below `positions`: each position's triangles listed once
-    /// (counted, then filled in triangle order), and each edge slot's key counted among the
-    /// edges of its smaller end's triangles. The same result as [`Neighbours::by_sort`].
+    /// (counted, then placed, side by side), and each edge slot's key counted among the edges
+    /// of its smaller end's triangles. The same result as [`Neighbours::by_sort`]; the order of
+    /// a position's list, which the threads decide, does not change it.
     fn by_position(corners: &[u32], positions: usize) -> Neighbours {
         // A triangle is listed once under each distinct position of its corners.
         let distinct = |t: &[u32], k: usize| (0..k).all(|j| t[j] != t[k]);
-        let mut start = vec![0u32; positions + 1];
-        for t in corners.chunks_exact(3) {
+        let atomic_zeros = |n: usize| -> Vec<AtomicU32> { (0..n).map(|_| AtomicU32::new(0)).collect() };
+        let counts = atomic_zeros(positions);
+        corners.par_chunks_exact(3).with_min_len(4096).for_each(|t| {
             for k in (0..3).filter(|&k| distinct(t, k)) {
-                start[t[k] as usize + 1] += 1;
+                counts[t[k] as usize].fetch_add(1, Relaxed);
             }
+        });
+        let mut start = Vec::with_capacity(positions + 1);
+        let mut at = 0u32;
+        for c in &counts {
+            start.push(at);
+            at += c.load(Relaxed);
         }
-        for p in 0..positions {
-            start[p + 1] += start[p];
-        }
-        let mut fill = start.clone();
-        let mut listed = vec![0u32; start[positions] as usize];
-        for (i, t) in corners.chunks_exact(3).enumerate() {
+        start.push(at);
+        let fill: Vec<AtomicU32> = start[..positions].iter().map(|&s| AtomicU32::new(s)).collect();
+        let listed = atomic_zeros(at as usize);
+        corners.par_chunks_exact(3).enumerate().with_min_len(4096).for_each(|(i, t)| {
             for k in (0..3).filter(|&k| distinct(t, k)) {
-                let at = &mut fill[t[k] as usize];
-                listed[*at as usize] = i as u32;
-                *at += 1;
+                listed[fill[t[k] as usize].fetch_add(1, Relaxed) as usize].store(i as u32, Relaxed);
             }
-        }
+        });
+        let listed: Vec<u32> = listed.into_iter().map(AtomicU32::into_inner).collect();
         let across = (0..corners.len() / 3)
             .into_par_iter()
             .with_min_len(4096)
@@ -194,7 +199,7 @@ impl<T: Real> Surface<T> {
     /// or `usize::MAX` for none): a triangle within `enough2` the walk reaches, else the
     /// hierarchy's answer (the nearest triangle where it is farther than `enough2`).
     pub fn nearest_squared(&self, p: [T; 3], enough2: T, hint: usize, steps: usize) -> (T, usize) {
-        match self.walk(p, enough2, hint, steps) {
+        match self.walk_within(p, enough2, hint, steps) {
             Ok(found) => found,
             Err(hint) => self.bvh.nearest_squared(&self.tris, p, enough2, hint),
         }
@@ -202,14 +207,17 @@ impl<T: Real> Surface<T> {
 
     /// Like [`Surface::nearest_squared`], with [`Bvh::within_squared`] after the walk.
     pub fn within_squared(&self, p: [T; 3], enough2: T, hint: usize, steps: usize) -> (T, usize) {
-        match self.walk(p, enough2, hint, steps) {
+        match self.walk_within(p, enough2, hint, steps) {
             Ok(found) => found,
             Err(hint) => self.bvh.within_squared(&self.tris, p, enough2, hint),
         }
     }
 
-    /// The walk's triangle where it is within `enough2`, else the hint for the hierarchy.
-    fn walk(&self, p: [T; 3], enough2: T, hint: usize, steps: usize) -> Result<(T, usize), usize> {
+    /// A walk of at most `steps` from `hint` (a triangle index; any other value walks
+    /// nowhere): the first triangle it reaches within `enough2` of `p` and the squared
+    /// distance, else (`Err`) the closest triangle it saw, or `hint` if it did not walk: the
+    /// hint for the hierarchy.
+    pub fn walk_within(&self, p: [T; 3], enough2: T, hint: usize, steps: usize) -> Result<(T, usize), usize> {
         if hint >= self.tris.len() {
             return Err(hint);
         }
@@ -270,12 +278,15 @@ mod tests {
             let a = (state >> 33) as u32 % 49;
             corners.extend_from_slice(&[a, (a + 1) % 49, (a + 7) % 49]);
         }
-        let positions = *corners.iter().max().unwrap() as usize + 1;
-        let (sorted, listed) = (Neighbours::by_sort(&corners), Neighbours::by_position(&corners, positions));
-        assert_eq!(sorted.across, listed.across);
-        assert!(
-            listed.across.iter().flatten().any(|&t| t != NONE) && listed.across.iter().flatten().any(|&t| t == NONE)
-        );
+        // And a grid large enough to be listed on several threads.
+        let (_, large) = grid(150);
+        for corners in [corners, large] {
+            let positions = *corners.iter().max().unwrap() as usize + 1;
+            let (sorted, listed) = (Neighbours::by_sort(&corners), Neighbours::by_position(&corners, positions));
+            assert_eq!(sorted.across, listed.across);
+            let across = || listed.across.iter().flatten();
+            assert!(across().any(|&t| t != NONE) && across().any(|&t| t == NONE));
+        }
     }
 
     #[test]
