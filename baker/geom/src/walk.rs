@@ -95,38 +95,11 @@ impl Neighbours {
             }
         });
         let listed: Vec<u32> = listed.into_iter().map(AtomicU32::into_inner).collect();
+        let lists = Lists { start: &start, listed: &listed };
         let across = (0..corners.len() / 3)
             .into_par_iter()
             .with_min_len(4096)
-            .map(|i| {
-                std::array::from_fn(|k| {
-                    let key = slot_key(corners, 3 * i + k);
-                    let [end, far] = edge_ends(key);
-                    let (from, to) = (start[end as usize] as usize, start[end as usize + 1] as usize);
-                    // The slots with this key among the triangles at its smaller end: every one.
-                    let mut count = 0;
-                    let mut other = NONE;
-                    for &u in &listed[from..to] {
-                        let c = &corners[3 * u as usize..3 * u as usize + 3];
-                        // Only a triangle at the other end too has such a slot.
-                        if c[0] != far && c[1] != far && c[2] != far {
-                            continue;
-                        }
-                        for j in 0..3 {
-                            let s = 3 * u as usize + j;
-                            if s != 3 * i + k && slot_key(corners, s) == key {
-                                count += 1;
-                                other = u;
-                            }
-                        }
-                    }
-                    if count == 1 {
-                        other
-                    } else {
-                        NONE
-                    }
-                })
-            })
+            .map(|t| [0, 1, 2].map(|k| lists.across(corners, 3 * t + k)))
             .collect();
         Neighbours { across }
     }
@@ -162,6 +135,40 @@ impl Neighbours {
             }
         }
         best
+    }
+}
+
+/// Each position's triangles (of [`Neighbours::by_position`]): those of position `p` are
+/// `listed[start[p]..start[p + 1]]`.
+struct Lists<'a> {
+    start: &'a [u32],
+    listed: &'a [u32],
+}
+
+impl Lists<'_> {
+    /// The triangle across edge slot `s` of `corners`: the one other slot with its key, among
+    /// the slots of the triangles at the key's smaller end, if there is exactly one.
+    fn across(&self, corners: &[u32], s: usize) -> u32 {
+        let key = slot_key(corners, s);
+        let [end, far] = edge_ends(key);
+        let (mut count, mut other) = (0, NONE);
+        for &u in &self.listed[self.start[end as usize] as usize..self.start[end as usize + 1] as usize] {
+            let c = &corners[3 * u as usize..3 * u as usize + 3];
+            // Only a triangle at the other end too has such a slot.
+            if c[0] != far && c[1] != far && c[2] != far {
+                continue;
+            }
+            for j in 3 * u as usize..3 * u as usize + 3 {
+                if j != s && slot_key(corners, j) == key {
+                    (count, other) = (count + 1, u);
+                }
+            }
+        }
+        if count == 1 {
+            other
+        } else {
+            NONE
+        }
     }
 }
 
