@@ -932,14 +932,10 @@ mod tests {
 
     /// A square fan around a centre raised by `h`, and the same square as two flat triangles.
     fn tent(h: f32) -> (WeldedMesh, Vec<u32>, Vec<u32>) {
-        let mesh = SourceMesh {
-            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.5, 0.5, h]],
-            uvs: None,
-            normals: None,
-            indices: vec![0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4],
-            materials: vec![0; 4],
-            degenerate_dropped: 0,
-        };
+        let mesh = SourceMesh::positions_only(
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.5, 0.5, h]],
+            vec![0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4],
+        );
         let w = weld(&mesh, &BakeSettings::default()).unwrap();
         let input = w.indices.clone();
         // The welded ids of the corners, by position.
@@ -997,16 +993,7 @@ mod tests {
             }
             indices
         };
-        let indices = quads(1);
-        let triangles = indices.len() / 3;
-        let mesh = SourceMesh {
-            positions,
-            uvs: None,
-            normals: None,
-            indices,
-            materials: vec![0; triangles],
-            degenerate_dropped: 0,
-        };
+        let mesh = SourceMesh::positions_only(positions, quads(1));
         let w = weld(&mesh, &BakeSettings::default()).unwrap();
         // Welded ids of the source's vertices: the nearest welded position (weld snaps them).
         let d2 = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>();

@@ -615,16 +615,7 @@ mod tests {
             indices.extend([a, b, c, a, c, d]);
         }
         indices.extend([4, 5, 12]);
-        let triangles = indices.len() / 3;
-        let source = SourceMesh {
-            positions,
-            uvs: None,
-            normals: None,
-            indices,
-            materials: vec![0; triangles],
-            degenerate_dropped: 0,
-        };
-        weld(&source, &BakeSettings::default()).unwrap()
+        weld(&SourceMesh::positions_only(positions, indices), &BakeSettings::default()).unwrap()
     }
 
     #[test]

@@ -78,14 +78,10 @@ mod tests {
     /// Two triangles sharing an edge (a quad): its four rim edges are open, the diagonal not.
     #[test]
     fn a_quad_marks_its_rim_once() {
-        let mesh = SourceMesh {
-            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
-            uvs: None,
-            normals: None,
-            indices: vec![0, 1, 2, 0, 2, 3],
-            materials: vec![0; 2],
-            degenerate_dropped: 0,
-        };
+        let mesh = SourceMesh::positions_only(
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+            vec![0, 1, 2, 0, 2, 3],
+        );
         let w = weld(&mesh, &BakeSettings::default()).unwrap();
         let needed = odd_of(&sorted_edge_keys(&w.indices, |v| w.position_ids[v as usize]));
         assert_eq!(needed.len(), 4);

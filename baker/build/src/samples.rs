@@ -460,15 +460,7 @@ mod tests {
                 indices.extend([at(x, y), at(x + 1, y), at(x + 1, y + 1), at(x, y), at(x + 1, y + 1), at(x, y + 1)]);
             }
         }
-        let triangles = indices.len() / 3;
-        let source = SourceMesh {
-            positions: positions.collect(),
-            uvs: None,
-            normals: None,
-            indices,
-            materials: vec![0; triangles],
-            degenerate_dropped: 0,
-        };
+        let source = SourceMesh::positions_only(positions.collect(), indices);
         let mesh = weld(&source, &BakeSettings::default()).unwrap();
         let p = |v: u32| mesh.positions[v as usize];
         let centroids: Vec<[f32; 3]> = mesh

@@ -3,11 +3,6 @@
 
 use mres_import::SourceMesh;
 
-fn mesh(positions: Vec<[f32; 3]>, indices: Vec<u32>) -> SourceMesh {
-    let materials = vec![0; indices.len() / 3];
-    SourceMesh { positions, normals: None, uvs: None, indices, materials, degenerate_dropped: 0 }
-}
-
 /// A closed sphere of radius 1 made from a cube with `n`×`n` quads per face (12·n² triangles),
 /// with normals. Vertices on cube edges are generated once, so the mesh is watertight.
 pub fn sphere(n: u32) -> SourceMesh {
@@ -47,7 +42,7 @@ pub fn sphere(n: u32) -> SourceMesh {
         }
     }
     let normals = positions.clone();
-    SourceMesh { normals: Some(normals), ..mesh(positions, indices) }
+    SourceMesh { normals: Some(normals), ..SourceMesh::positions_only(positions, indices) }
 }
 
 /// The cube-sphere of [`sphere`] with every cube face a separate UV chart and material: the
@@ -111,7 +106,7 @@ pub fn terrain(n: u32) -> SourceMesh {
             indices.extend_from_slice(&[i, i + row, i + 1, i + 1, i + row, i + row + 1]);
         }
     }
-    SourceMesh { uvs: Some(uvs), ..mesh(positions, indices) }
+    SourceMesh { uvs: Some(uvs), ..SourceMesh::positions_only(positions, indices) }
 }
 
 /// `count` disconnected closed boxes on a square grid, each face split into `k`×`k` quads
@@ -128,7 +123,7 @@ pub fn boxes(count: u32, k: u32) -> SourceMesh {
         positions.extend(unit.positions.iter().map(|p| [gx + p[0] * scale, p[1] * scale, gz + p[2] * scale]));
         indices.extend(unit.indices.iter().map(|i| base + i));
     }
-    mesh(positions, indices)
+    SourceMesh::positions_only(positions, indices)
 }
 
 /// A closed unit box from −0.5 to 0.5 with `k`×`k` quads per face.
@@ -143,7 +138,7 @@ fn sphere_free_box(k: u32) -> SourceMesh {
             [p[0] / m * 0.5, p[1] / m * 0.5, p[2] / m * 0.5]
         })
         .collect();
-    mesh(positions, cube.indices)
+    SourceMesh::positions_only(positions, cube.indices)
 }
 
 /// Foliage-like aggregate geometry: `count` disconnected two-triangle cards (open quads) of
@@ -169,7 +164,7 @@ pub fn cards(count: u32) -> SourceMesh {
         }
         indices.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
     }
-    mesh(positions, indices)
+    SourceMesh::positions_only(positions, indices)
 }
 
 /// An open multi-part scene like an architecture kit: `count` rooms on a square grid, each a
@@ -230,7 +225,7 @@ pub fn rooms(count: u32) -> SourceMesh {
             quads(base, [0.5 * a.cos(), 0.0, 0.5 * a.sin()], [0.1, 0.9, 0.05], 1, &solid);
         }
     }
-    mesh(positions, indices)
+    SourceMesh::positions_only(positions, indices)
 }
 
 /// The cube-sphere with defects real scans and CAD exports have: every 97th triangle removed
@@ -256,7 +251,7 @@ pub fn defects(n: u32) -> SourceMesh {
             indices.extend_from_slice(&[tri[0], tri[1], positions.len() as u32 - 1]);
         }
     }
-    mesh(positions, indices)
+    SourceMesh::positions_only(positions, indices)
 }
 
 #[cfg(test)]

@@ -27,6 +27,13 @@ pub struct SourceMesh {
 }
 
 impl SourceMesh {
+    /// A mesh of positions and a triangle list alone: no normals or UVs, one material, nothing
+    /// dropped (generated meshes and tests).
+    pub fn positions_only(positions: Vec<[f32; 3]>, indices: Vec<u32>) -> SourceMesh {
+        let materials = vec![0; indices.len() / 3];
+        SourceMesh { positions, normals: None, uvs: None, indices, materials, degenerate_dropped: 0 }
+    }
+
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.indices.len() / 3
