@@ -259,11 +259,10 @@ impl Original {
                 let enough = d * d;
                 // From the previous sample's triangle (mostly near, and in the caches), else
                 // from a level-0 triangle at the sample's nearest corner (edge k's midpoint, bit
-                // 3 + k, at corner k; the centroid at corner 0), then the hierarchy.
-                let (d2, nearest) = self.surface.walk_within(p, enough, hint, WALK_STEPS).unwrap_or_else(|_| {
-                    let corner = self.at_position[id(t[b.saturating_sub(3) % 3]) as usize] as usize;
-                    self.surface.within_squared(p, enough, corner, WALK_STEPS)
-                });
+                // 3 + k, at corner k; the centroid at corner 0), then the hierarchy from the
+                // closer end (a corner can be far: the apex of a fan of slivers).
+                let corner = || self.at_position[id(t[b.saturating_sub(3) % 3]) as usize] as usize;
+                let (d2, nearest) = self.surface.within_squared2(p, enough, hint, corner, WALK_STEPS);
                 hint = nearest;
                 if d2 > enough {
                     worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + self.slack));

@@ -11,7 +11,7 @@
 //! No library walks a general triangle soup in 3-D by closest-point regions (triangulation
 //! crates walk planar Delaunay meshes), so this is written here.
 
-use crate::bvh::{closest_feature2, Bvh, Feature, Real, Triangle};
+use crate::bvh::{closest_feature2, point_triangle_distance2, Bvh, Feature, Real, Triangle};
 use crate::edges::{edge_ends, edge_key};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
@@ -31,14 +31,15 @@ impl Neighbours {
     /// count leaves its slots without a neighbour.
     pub fn new(corners: &[u32]) -> Neighbours {
         let positions = corners.iter().copied().max().map_or(0, |m| m as usize + 1);
-        // Dense ids (a whole mesh's): each edge is found among its first end's triangles,
-        // without sorting every edge. Sparse ids (a group's, numbered over the whole mesh):
-        // the sort, which needs no table over every id.
-        if corners.len() >= DENSE_MIN && positions <= corners.len() {
-            Neighbours::by_position(corners, positions)
-        } else {
-            Neighbours::by_sort(corners)
-        }
+        // Dense ids (a whole mesh's): each edge is found among the triangles at one of its
+        // ends, without sorting every edge. Sparse ids (a group's, numbered over the whole
+        // mesh), or a position with very many triangles: the sort, which needs no table over
+        // every id and costs the same whatever the valences.
+        let dense = corners.len() >= DENSE_MIN && positions <= corners.len();
+        dense
+            .then(|| Neighbours::by_position(corners, positions))
+            .flatten()
+            .unwrap_or_else(|| Neighbours::by_sort(corners))
     }
 
     /// [`Neighbours::new`] by sorting every edge slot by key and pairing runs of two.
@@ -68,9 +69,11 @@ impl Neighbours {
 
     /// [`Neighbours::new`] for ids below `positions`: each position's triangles listed once
     /// (counted, then placed, side by side), and each edge slot's key counted among the edges
-    /// of its smaller end's triangles. The same result as [`Neighbours::by_sort`]; the order of
-    /// a position's list, which the threads decide, does not change it.
-    fn by_position(corners: &[u32], positions: usize) -> Neighbours {
+    /// of the triangles at the end with fewer. The same result as [`Neighbours::by_sort`]; the
+    /// order of a position's list, which the threads decide, does not change it. `None` where
+    /// a position has more than [`MAX_LISTED`] triangles: each of its edges would
+    /// look through all of them (a fan of a million triangles around one apex, a million times).
+    fn by_position(corners: &[u32], positions: usize) -> Option<Neighbours> {
         // A triangle is listed once under each distinct position of its corners.
         let distinct = |t: &[u32], k: usize| (0..k).all(|j| t[j] != t[k]);
         let atomic_zeros = |n: usize| -> Vec<AtomicU32> { (0..n).map(|_| AtomicU32::new(0)).collect() };
@@ -83,8 +86,12 @@ impl Neighbours {
         let mut start = Vec::with_capacity(positions + 1);
         let mut at = 0u32;
         for c in &counts {
+            let c = c.load(Relaxed);
+            if c > MAX_LISTED {
+                return None;
+            }
             start.push(at);
-            at += c.load(Relaxed);
+            at += c;
         }
         start.push(at);
         let fill: Vec<AtomicU32> = start[..positions].iter().map(|&s| AtomicU32::new(s)).collect();
@@ -101,7 +108,7 @@ impl Neighbours {
             .with_min_len(4096)
             .map(|t| [0, 1, 2].map(|k| lists.across(corners, 3 * t + k)))
             .collect();
-        Neighbours { across }
+        Some(Neighbours { across })
     }
 
     /// From triangle `start` (of `tris`, the triangles this was made from), walks towards `p`
@@ -147,12 +154,15 @@ struct Lists<'a> {
 
 impl Lists<'_> {
     /// The triangle across edge slot `s` of `corners`: the one other slot with its key, among
-    /// the slots of the triangles at the key's smaller end, if there is exactly one.
+    /// the slots of the triangles at the end with fewer, if there is exactly one.
     fn across(&self, corners: &[u32], s: usize) -> u32 {
         let key = slot_key(corners, s);
-        let [end, far] = edge_ends(key);
+        let list = |p: u32| &self.listed[self.start[p as usize] as usize..self.start[p as usize + 1] as usize];
+        // Every triangle with such a slot is at both ends: the shorter list holds them all.
+        let [a, b] = edge_ends(key);
+        let (end, far) = if list(a).len() <= list(b).len() { (a, b) } else { (b, a) };
         let (mut count, mut other) = (0, NONE);
-        for &u in &self.listed[self.start[end as usize] as usize..self.start[end as usize + 1] as usize] {
+        for &u in list(end) {
             let c = &corners[3 * u as usize..3 * u as usize + 3];
             // Only a triangle at the other end too has such a slot.
             if c[0] != far && c[1] != far && c[2] != far {
@@ -174,6 +184,10 @@ impl Lists<'_> {
 
 /// Fewest corners for which [`Neighbours::new`] pairs edges by position rather than by sorting.
 const DENSE_MIN: usize = 64 * 1024;
+
+/// Most triangles at one position for [`Neighbours::by_position`] (scans, dense meshes, have
+/// about six).
+const MAX_LISTED: u32 = 256;
 
 /// The edge key of slot `s` of `corners`: edge `s % 3` of triangle `s / 3`, from its corner
 /// `s % 3` to the next.
@@ -212,6 +226,30 @@ impl<T: Real> Surface<T> {
         }
     }
 
+    /// Like [`Surface::within_squared`], with a second walk from triangle `second()` where the
+    /// first, from `first`, does not get within `enough2`; the hierarchy then starts from the
+    /// closer of the two walks' ends.
+    pub fn within_squared2(
+        &self,
+        p: [T; 3],
+        enough2: T,
+        first: usize,
+        second: impl FnOnce() -> usize,
+        steps: usize,
+    ) -> (T, usize) {
+        let a = match self.walk_within(p, enough2, first, steps) {
+            Ok(found) => return found,
+            Err(a) => a,
+        };
+        let b = match self.walk_within(p, enough2, second(), steps) {
+            Ok(found) => return found,
+            Err(b) => b,
+        };
+        let distance = |t: usize| self.tris.get(t).map_or(T::INFINITY, |tri| point_triangle_distance2(p, tri));
+        let start = if distance(a) <= distance(b) { a } else { b };
+        self.bvh.within_squared(&self.tris, p, enough2, start)
+    }
+
     /// Like [`Surface::nearest_squared`], with [`Bvh::within_squared`] after the walk.
     pub fn within_squared(&self, p: [T; 3], enough2: T, hint: usize, steps: usize) -> (T, usize) {
         match self.walk_within(p, enough2, hint, steps) {
@@ -240,7 +278,7 @@ impl<T: Real> Surface<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bvh::point_triangle_distance2;
+
 
     /// A flat `n` × `n` grid of unit squares, two triangles each, and its corners' ids.
     fn grid(n: u32) -> (Vec<Triangle<f64>>, Vec<u32>) {
@@ -289,11 +327,23 @@ mod tests {
         let (_, large) = grid(150);
         for corners in [corners, large] {
             let positions = *corners.iter().max().unwrap() as usize + 1;
-            let (sorted, listed) = (Neighbours::by_sort(&corners), Neighbours::by_position(&corners, positions));
+            let (sorted, listed) =
+                (Neighbours::by_sort(&corners), Neighbours::by_position(&corners, positions).unwrap());
             assert_eq!(sorted.across, listed.across);
             let across = || listed.across.iter().flatten();
             assert!(across().any(|&t| t != NONE) && across().any(|&t| t == NONE));
         }
+    }
+
+    #[test]
+    fn a_wide_fan_is_paired_by_sorting() {
+        // A closed fan of 300 triangles around position 0: too many to list by position.
+        let fan: Vec<u32> = (0..300u32).flat_map(|i| [0, 1 + i, 1 + (i + 1) % 300]).collect();
+        assert!(Neighbours::by_position(&fan, 301).is_none());
+        let n = Neighbours::new(&fan);
+        // Each triangle's neighbours are the triangles before and after it around the apex.
+        assert_eq!(n.across[0], [299, NONE, 1]);
+        assert!(Neighbours::by_position(&fan[..3 * 200], 301).is_some());
     }
 
     #[test]
