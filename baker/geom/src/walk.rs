@@ -279,7 +279,6 @@ impl<T: Real> Surface<T> {
 mod tests {
     use super::*;
 
-
     /// A flat `n` × `n` grid of unit squares, two triangles each, and its corners' ids.
     fn grid(n: u32) -> (Vec<Triangle<f64>>, Vec<u32>) {
         let id = |x: u32, y: u32| y * (n + 1) + x;
