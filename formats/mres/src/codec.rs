@@ -437,16 +437,16 @@ pub(crate) fn source_keys<'a>(sources: impl IntoIterator<Item = &'a Quantized>) 
 /// others) rather than once per page that reads it; a page looks up each of its new vertices in
 /// every source, so a lookup is one hash probe. Built by counting, not sorting: the keys are
 /// numbered by first appearance, and each key's numbers are laid out in the order they come.
-pub(crate) struct SortedKeys {
+pub(crate) struct PageKeys {
     /// Every vertex's number in the page, grouped by key.
     numbers: Vec<u32>,
     /// Per key, where its numbers start in `numbers` and how many there are.
     runs: rustc_hash::FxHashMap<VertexKey, (u32, u32)>,
 }
 
-impl SortedKeys {
+impl PageKeys {
     /// The index of one source page's vertex `keys` (in its own numbering).
-    pub(crate) fn new(keys: &[VertexKey]) -> SortedKeys {
+    pub(crate) fn new(keys: &[VertexKey]) -> PageKeys {
         let mut runs: rustc_hash::FxHashMap<VertexKey, (u32, u32)> = rustc_hash::FxHashMap::default();
         runs.reserve(keys.len());
         // Count each key's vertices, then give each key its range (in first-appearance order).
@@ -476,7 +476,7 @@ impl SortedKeys {
         for run in runs.values_mut() {
             *run = (starts[run.0 as usize], counts[run.0 as usize]);
         }
-        SortedKeys { numbers, runs }
+        PageKeys { numbers, runs }
     }
 
     /// How many vertices it has.
@@ -491,16 +491,16 @@ impl SortedKeys {
     }
 }
 
-/// A page's source vertices found by key: its source pages' [`SortedKeys`] in order, each
+/// A page's source vertices found by key: its source pages' [`PageKeys`] in order, each
 /// numbered from the sum of the vertex counts before it (the source numbering of FORMAT.md
 /// §4.3).
 pub(crate) struct SourceIndex<'a> {
-    sources: Vec<(&'a SortedKeys, u32)>,
+    sources: Vec<(&'a PageKeys, u32)>,
 }
 
 impl<'a> SourceIndex<'a> {
     /// The index of the source pages `sources`, in order.
-    pub(crate) fn new(sources: impl IntoIterator<Item = &'a SortedKeys>) -> SourceIndex<'a> {
+    pub(crate) fn new(sources: impl IntoIterator<Item = &'a PageKeys>) -> SourceIndex<'a> {
         let mut first = 0u32;
         let sources = sources
             .into_iter()

@@ -426,7 +426,7 @@ thread_local! {
 /// keys in source numbering, and its GPU layout and cluster records, as a reader holds them.
 struct SourceData {
     /// Its vertices by key, for the far copies of the pages it is a source of.
-    keys: codec::SortedKeys,
+    keys: codec::PageKeys,
     layout: Vec<u8>,
     records: Vec<ClusterInfo>,
 }
@@ -435,7 +435,7 @@ impl SourceData {
     fn new(clusters: &[&EncodedCluster], flags: u32) -> SourceData {
         let quantized: Vec<Quantized> = clusters.iter().map(|c| c.quantized(flags)).collect();
         SourceData {
-            keys: codec::SortedKeys::new(&codec::source_keys(&quantized)),
+            keys: codec::PageKeys::new(&codec::source_keys(&quantized)),
             layout: assemble_page(clusters).0,
             records: page_records(clusters),
         }
@@ -989,7 +989,7 @@ mod tests {
         let sources = Sources::new(&source_pages, flags);
         let records = records(&clusters);
         let streams =
-            codec::encode_page(&clusters, flags, &codec::SourceIndex::new([&codec::SortedKeys::new(&sources.keys)]))
+            codec::encode_page(&clusters, flags, &codec::SourceIndex::new([&codec::PageKeys::new(&sources.keys)]))
                 .unwrap();
         let bytes = streams.concat();
         let references = &streams[4];
@@ -1042,8 +1042,8 @@ mod tests {
     #[test]
     fn far_copies_name_the_nearest_equal_source_vertex() {
         let keys: Vec<codec::VertexKey> = [5, 7, 5, 9, 5].iter().map(|&x| ([x, 0, 0], [0; 2], [0; 2])).collect();
-        let sorted = codec::SortedKeys::new(&keys);
-        let index = codec::SourceIndex::new([&sorted]);
+        let page = codec::PageKeys::new(&keys);
+        let index = codec::SourceIndex::new([&page]);
         let five = ([5, 0, 0], [0; 2], [0; 2]);
         assert_eq!(index.nearest(&five, 0), Some(0));
         assert_eq!(index.nearest(&five, 2), Some(2));
@@ -1053,7 +1053,7 @@ mod tests {
         // The same vertices as the pages of several sources: numbered on across them, and the
         // same answers, wherever the split falls.
         for split in 0..=keys.len() {
-            let (a, b) = (codec::SortedKeys::new(&keys[..split]), codec::SortedKeys::new(&keys[split..]));
+            let (a, b) = (codec::PageKeys::new(&keys[..split]), codec::PageKeys::new(&keys[split..]));
             let two = codec::SourceIndex::new([&a, &b]);
             for x in 4..=10 {
                 for next in -2..12 {
