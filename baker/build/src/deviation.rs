@@ -619,18 +619,18 @@ fn accept_patches(
     if input.is_empty() {
         return;
     }
-    let leaves = BoxPyramid::leaves((input, reach), duty);
     // A patch settles only if each of its entries' boxes is as small as it must be, for the
     // smallest member error: count those (an upper bound on what patches can settle) among
-    // the entries to measure (those with a box).
+    // the entries to measure (those with a box), before building anything (at the lower
+    // levels hardly any is).
     let half = 0.5 * bound(0.0);
-    let count = |b: &Box3| half_diagonal(b).map_or((0, 0), |r| (1, usize::from(r < half)));
-    let (measured, small) =
-        leaves.par_iter().with_min_len(4096).map(count).reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let count = |b: Box3| half_diagonal(&b).map_or((0, 0), |r| (1, usize::from(r < half)));
+    let entries = || input.par_iter().zip(&duty[..]).zip(reach).with_min_len(4096);
+    let (measured, small) = entries().map(|e| count(leaf(e))).reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     if small * FEW_SMALL < measured {
         return;
     }
-    let boxes = BoxPyramid::new(leaves, triangle_errors);
+    let boxes = BoxPyramid::new(entries().map(leaf).collect(), triangle_errors);
     let patches = Patches { boxes: &boxes, output, bound: &bound };
     // The patches above runs of 2^PATCH_RUN entries first, then each such run left unsettled
     // on its own, side by side (a group's runs are many only at the top levels, where one group
@@ -719,6 +719,17 @@ impl<F: Fn(f32) -> f32> Patches<'_, F> {
     }
 }
 
+/// The pyramid's level 0 for one entry: the box of a triangle grown by its `reach` (see
+/// `InputSide::reach`); one whose duty is 0 has nothing to measure and gets an empty box.
+fn leaf(((t, &duty), &reach): ((&Triangle<f32>, &u8), &f32)) -> Box3 {
+    if duty == 0 {
+        return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    }
+    let lo = [0, 1, 2].map(|k| lesser(lesser(t[0][k], t[1][k]), t[2][k]) - reach);
+    let hi = [0, 1, 2].map(|k| greater(greater(t[0][k], t[1][k]), t[2][k]) + reach);
+    (lo, hi)
+}
+
 /// Bounding boxes of runs of triangles: level 0 one per triangle, level j + 1 the union of
 /// pairs of level j (runs of 2^j triangles), up to one box for all. Built in linear time, so
 /// that trying patches costs little where none settles.
@@ -730,22 +741,7 @@ struct BoxPyramid {
 }
 
 impl BoxPyramid {
-    /// The pyramid's level 0: the boxes of `triangles` grown by their `reach` (see
-    /// `InputSide::reach`); those whose `duty` is 0 have nothing to measure and get an empty
-    /// box.
-    fn leaves((triangles, reach): (&[Triangle<f32>], &[f32]), duty: &[u8]) -> Vec<Box3> {
-        let one = |((t, &d), &r): ((&Triangle<f32>, &u8), &f32)| {
-            if d == 0 {
-                return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-            }
-            let lo = [0, 1, 2].map(|k| lesser(lesser(t[0][k], t[1][k]), t[2][k]) - r);
-            let hi = [0, 1, 2].map(|k| greater(greater(t[0][k], t[1][k]), t[2][k]) + r);
-            (lo, hi)
-        };
-        triangles.par_iter().zip(duty).zip(reach).with_min_len(4096).map(one).collect()
-    }
-
-    /// The pyramid over `leaves` (see [`BoxPyramid::leaves`]), with their entries' `errors`.
+    /// The pyramid over `leaves` (see [`leaf`]), with their entries' `errors`.
     fn new(leaves: Vec<Box3>, errors: &[f32]) -> BoxPyramid {
         let mut levels = vec![leaves];
         while levels[levels.len() - 1].len() > 1 {
