@@ -69,10 +69,13 @@ impl Neighbours {
 
     /// [`Neighbours::new`] for ids below `positions`: each position's triangles listed once
     /// (counted, then placed, side by side), and each edge slot's key counted among the edges
-    /// of the triangles at the end with fewer. The same result as [`Neighbours::by_sort`]; the
-    /// order of a position's list, which the threads decide, does not change it. `None` where
-    /// a position has more than [`MAX_LISTED`] triangles: each of its edges would
-    /// look through all of them (a fan of a million triangles around one apex, a million times).
+    /// of the triangles listed at its smaller end, position by position (a list and its
+    /// triangles are read once for all of a position's edges, not once per edge slot: a
+    /// position's ids lie scattered over a large mesh's triangles). The same result as
+    /// [`Neighbours::by_sort`]; the order of a position's list, which the threads decide, does
+    /// not change it. `None` where a position has more than [`MAX_LISTED`] triangles: each of
+    /// its edges would look through all of them (a fan of a million triangles around one apex,
+    /// a million times).
     fn by_position(corners: &[u32], positions: usize) -> Option<Neighbours> {
         // A triangle is listed once under each distinct position of its corners.
         let distinct = |t: &[u32], k: usize| (0..k).all(|j| t[j] != t[k]);
@@ -103,11 +106,11 @@ impl Neighbours {
         });
         let listed: Vec<u32> = listed.into_iter().map(AtomicU32::into_inner).collect();
         let lists = Lists { start: &start, listed: &listed };
-        let across = (0..corners.len() / 3)
-            .into_par_iter()
-            .with_min_len(4096)
-            .map(|t| [0, 1, 2].map(|k| lists.across(corners, 3 * t + k)))
-            .collect();
+        // Each edge slot is paired at its key's smaller end, so written once; a position's
+        // list and its triangles are read once for all of its edges.
+        let slots: Vec<AtomicU32> = (0..corners.len()).map(|_| AtomicU32::new(NONE)).collect();
+        (0..positions as u32).into_par_iter().with_min_len(1024).for_each(|p| lists.pair(corners, p, &slots));
+        let across = slots.par_chunks(3).with_min_len(4096).map(|s| [0, 1, 2].map(|k| s[k].load(Relaxed))).collect();
         Some(Neighbours { across })
     }
 
@@ -153,31 +156,34 @@ struct Lists<'a> {
 }
 
 impl Lists<'_> {
-    /// The triangle across edge slot `s` of `corners`: the one other slot with its key, among
-    /// the slots of the triangles at the end with fewer, if there is exactly one.
-    fn across(&self, corners: &[u32], s: usize) -> u32 {
-        let key = slot_key(corners, s);
-        let list = |p: u32| &self.listed[self.start[p as usize] as usize..self.start[p as usize + 1] as usize];
-        // Every triangle with such a slot is at both ends: the shorter list holds them all.
-        let [a, b] = edge_ends(key);
-        let (end, far) = if list(a).len() <= list(b).len() { (a, b) } else { (b, a) };
-        let (mut count, mut other) = (0, NONE);
-        for &u in list(end) {
-            let c = &corners[3 * u as usize..3 * u as usize + 3];
-            // Only a triangle at the other end too has such a slot.
-            if c[0] != far && c[1] != far && c[2] != far {
-                continue;
-            }
-            for j in 3 * u as usize..3 * u as usize + 3 {
-                if j != s && slot_key(corners, j) == key {
-                    (count, other) = (count + 1, u);
+    /// Pairs the edge slots of `corners` whose key's smaller end is position `p`: each gets
+    /// the triangle of the one other slot with its key, if there is exactly one (every
+    /// triangle with such a slot is at `p`, so in its list), else [`NONE`].
+    fn pair(&self, corners: &[u32], p: u32, slots: &[AtomicU32]) {
+        let list = &self.listed[self.start[p as usize] as usize..self.start[p as usize + 1] as usize];
+        for &t in list {
+            let first = 3 * t as usize;
+            for (s, slot) in (first..).zip(&slots[first..first + 3]) {
+                let key = slot_key(corners, s);
+                let [low, far] = edge_ends(key);
+                if low != p {
+                    continue;
                 }
+                let (mut count, mut other) = (0, NONE);
+                for &u in list {
+                    let c = &corners[3 * u as usize..3 * u as usize + 3];
+                    // Only a triangle at the other end too has such a slot.
+                    if c[0] != far && c[1] != far && c[2] != far {
+                        continue;
+                    }
+                    for j in 3 * u as usize..3 * u as usize + 3 {
+                        if j != s && slot_key(corners, j) == key {
+                            (count, other) = (count + 1, u);
+                        }
+                    }
+                }
+                slot.store(if count == 1 { other } else { NONE }, Relaxed);
             }
-        }
-        if count == 1 {
-            other
-        } else {
-            NONE
         }
     }
 }
