@@ -8,5 +8,4 @@ pub mod config;
 pub mod export;
 pub mod generate;
 pub mod inspect;
-pub mod memory;
 pub mod tree;

@@ -93,7 +93,6 @@ const LARGE_ASSET_TRIANGLES: u64 = 1_000_000;
 const STALE_LISTED: usize = 5;
 
 fn main() -> ExitCode {
-    mres_cli::memory::keep_freed_memory();
     match run(Cli::parse()) {
         Ok(code) => code,
         Err(e) => {

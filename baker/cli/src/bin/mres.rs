@@ -303,7 +303,6 @@ fn write_obj_named(mesh: &SourceMesh, names: &[Option<String>], out: Output) -> 
 }
 
 fn main() -> ExitCode {
-    mres_cli::memory::keep_freed_memory();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Validate(a) => validate_cmd(a),
