@@ -315,10 +315,10 @@ pub fn uv_quant(uvs: &[[f32; 2]]) -> UvQuant {
 mod tests {
     use super::*;
 
-    #[test]
-    fn seams_stay_apart_but_share_position_ids() {
-        // Two triangles sharing an edge, with different UVs on the shared vertices.
-        let mesh = SourceMesh {
+    /// Two triangles sharing an edge, with different UVs on the shared vertices; with `third`,
+    /// a third triangle of another material on that edge's second copy.
+    fn seamed_pair(third: bool) -> SourceMesh {
+        let mut mesh = SourceMesh {
             positions: vec![
                 [0.0, 0.0, 0.0],
                 [1.0, 0.0, 0.0],
@@ -333,7 +333,18 @@ mod tests {
             materials: vec![0, 0],
             degenerate_dropped: 0,
         };
-        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        if third {
+            mesh.positions.push([2.0, 0.0, 1.0]);
+            mesh.uvs.as_mut().unwrap().push([0.2, 0.2]);
+            mesh.indices.extend([3, 6, 5]);
+            mesh.materials.push(1);
+        }
+        mesh
+    }
+
+    #[test]
+    fn seams_stay_apart_but_share_position_ids() {
+        let w = weld(&seamed_pair(false), &BakeSettings::default()).unwrap();
         assert_eq!(w.grid_positions.len(), 6);
         assert_eq!(w.position_count, 4);
         // Vertices share a position id exactly when they share a grid point.
@@ -351,23 +362,8 @@ mod tests {
 
     #[test]
     fn numbering_by_an_order_keeps_every_triangle_and_seam() {
-        // The seamed pair above, plus a third triangle, numbered by a reversed order.
-        let mesh = SourceMesh {
-            positions: vec![
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                [1.0, 1.0, 0.0],
-                [2.0, 0.0, 1.0],
-            ],
-            uvs: Some(vec![[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.6, 0.0], [0.0, 0.6], [1.0, 1.0], [0.2, 0.2]]),
-            normals: None,
-            indices: vec![0, 1, 2, 3, 5, 4, 3, 6, 5],
-            materials: vec![0, 0, 1],
-            degenerate_dropped: 0,
-        };
+        // The seamed pair, plus a third triangle, numbered in another order.
+        let mesh = seamed_pair(true);
         let w = weld(&mesh, &BakeSettings::default()).unwrap();
         let order = [2, 0, 1];
         let n = weld(&mesh, &BakeSettings::default()).unwrap().numbered_by(&order);
