@@ -216,6 +216,13 @@ impl ExposureTest {
         hits
     }
 
+    /// Whether pixel (x, y)'s ray crosses none of these triangles: when they are the drawn cut,
+    /// the pixel centre lies outside its silhouette, and a face the GPU drew there covers the
+    /// pixel only through the rasterizer's snapping of vertices to its sub-pixel grid.
+    pub fn misses(&self, x: usize, y: usize) -> bool {
+        self.crossings(x, y).is_empty()
+    }
+
     /// The view depth of the first crossing of pixel (x, y)'s ray if it is a back face: what the
     /// pixel centre sees of these triangles when they are the drawn cut.
     pub fn first_back_depth(&self, x: usize, y: usize) -> Option<f32> {
@@ -455,6 +462,18 @@ mod tests {
         assert_eq!(test(&[0b011, 0b010]), 1);
         // The diagonal marked on both sides (bit 2 of the first, bit 0 of the second).
         assert_eq!(test(&[0b111, 0b111]), 1);
+    }
+
+    #[test]
+    fn a_ray_beside_the_drawn_cut_misses_it() {
+        // Pixel (8, 8) looks at the origin: a wall across it is crossed, one beside it is not.
+        assert!(!ExposureTest::new(&camera(), square(-1.0, 2.0, false)).misses(8, 8));
+        assert!(ExposureTest::new(&camera(), rect([0.5, 2.0], [-2.0, 2.0], -1.0, false)).misses(8, 8));
+        // A box without its near wall: the ray through the gap crosses the far wall (a hole
+        // is never missed this way).
+        let mut open_box = square(-1.0, 2.0, false);
+        open_box.extend(rect([-2.0, 2.0], [0.5, 2.0], 1.0, true));
+        assert!(!ExposureTest::new(&camera(), open_box).misses(8, 8));
     }
 
     #[test]

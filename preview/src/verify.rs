@@ -433,7 +433,8 @@ struct CrackRender<'a> {
 }
 
 impl CrackRender<'_> {
-    /// (hole pixels, exposed pixels, the first hole pixel). `exposure` is the camera's test
+    /// (hole pixels, the other candidates: exposed or outside the drawn cut's silhouette, the
+    /// first hole pixel). `exposure` is the camera's test
     /// over the full-detail triangles, built here on first need.
     fn holes(
         &self,
@@ -472,6 +473,13 @@ impl CrackRender<'_> {
         let (mut holes, mut first) = (0, None);
         for &i in &candidates {
             let (x, y) = (i % w, i / w);
+            // The pixel centre lies outside the drawn cut's silhouette: the back face covers it
+            // only through the rasterizer's snapping (a silhouette pixel, seen on lavapipe's
+            // mesh-shader path), not through an opening in the cut, which the ray would cross
+            // to reach the far side.
+            if cut.misses(x, y) {
+                continue;
+            }
             let mut depths = neighbour_depths(self.depth, x, y, w, camera.z_near);
             depths.extend(cut.first_back_depth(x, y));
             // Or the surface in front moved within the error, only the ray passes it (a slip
