@@ -358,6 +358,8 @@ impl ShardContext<'_> {
         let mut welded = weld_on(&mesh, self.settings, self.grid.0, self.grid.1);
         welded.multi_material = self.multi_material;
         drop(mesh);
+        let order = triangle_order(&welded);
+        let welded = welded.numbered_by(&order);
         // The shard's odd edges that are odd in the whole mesh too are open; the rest are
         // shard borders (`Builder` locks them).
         let mut point = vec![[0i32; 3]; welded.position_count];
@@ -374,13 +376,7 @@ impl ShardContext<'_> {
                 global_open.contains(&grid_edge(q(a), q(b)))
             })
             .collect();
-        let cell = self.levels(
-            &welded,
-            level0(&welded, self.settings, (&edges, &open), &triangle_order(&welded)),
-            0,
-            false,
-            output,
-        )?;
+        let cell = self.levels(&welded, level0(&welded, self.settings, (&edges, &open), &order), 0, false, output)?;
         Ok(Cell {
             triangles,
             welded_vertices: welded.positions.len() as u64,

@@ -32,6 +32,7 @@ pub fn build_whole<O: DagOutput>(
     // The whole level-0 surface that errors are measured against, made beside the clusters.
     let measured = settings.error_bound == ErrorBound::Measured;
     let order = triangle_order(&welded);
+    let welded = welded.numbered_by(&order);
     // The mesh's edges, sorted once: its open edges for the clusters, its locked positions.
     let edges = Level0Edges::new(&welded);
     // The part sizes and the first level's groups (METIS) are serial passes: beside the
