@@ -132,6 +132,14 @@ pub fn triangle_order(mesh: &WeldedMesh) -> Vec<u32> {
     order.into_iter().map(|(_, t)| t).collect()
 }
 
+/// `mesh` with its vertices and position ids numbered by first use in its [`triangle_order`]
+/// (see [`WeldedMesh::numbered_by`]), and that order: how a whole mesh or a shard enters
+/// level 0.
+pub fn numbered_in_triangle_order(mesh: WeldedMesh) -> (WeldedMesh, Vec<u32>) {
+    let order = triangle_order(&mesh);
+    (mesh.numbered_by(&order), order)
+}
+
 /// 30-bit Morton codes of points, quantized over their bounding box.
 pub fn morton_codes(points: &[[f32; 3]]) -> Vec<u32> {
     let mut lo = [f32::INFINITY; 3];

@@ -30,7 +30,7 @@
 use crate::dag::{BuildStats, BuiltCluster, BuiltDag, Cell, Collected, DagOutput, Frame, StageClock, TopCluster};
 use crate::error::BakeError;
 use crate::levels::{level0, Builder, Level0Edges};
-use crate::partition::triangle_order;
+use crate::partition::numbered_in_triangle_order;
 use crate::progress::Progress;
 use crate::settings::BakeSettings;
 use crate::source::TriangleSource;
@@ -358,8 +358,7 @@ impl ShardContext<'_> {
         let mut welded = weld_on(&mesh, self.settings, self.grid.0, self.grid.1);
         welded.multi_material = self.multi_material;
         drop(mesh);
-        let order = triangle_order(&welded);
-        let welded = welded.numbered_by(&order);
+        let (welded, order) = numbered_in_triangle_order(welded);
         // The shard's odd edges that are odd in the whole mesh too are open; the rest are
         // shard borders (`Builder` locks them).
         let mut point = vec![[0i32; 3]; welded.position_count];

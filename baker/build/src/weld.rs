@@ -250,25 +250,19 @@ impl WeldedMesh {
         let (vertices, positions) = (self.positions.len(), self.position_count);
         let (mut vertex_new, mut position_new) = (vec![u32::MAX; vertices], vec![u32::MAX; positions]);
         let (mut vertex_old, mut numbered) = (Vec::with_capacity(vertices), 0u32);
-        let mut number = |p: usize, new: &mut [u32]| {
-            if new[p] == u32::MAX {
-                new[p] = numbered;
-                numbered += 1;
-            }
-        };
         let corners = order.iter().flat_map(|&t| &self.indices[3 * t as usize..3 * t as usize + 3]);
-        // Vertices no triangle uses (welding can leave some) follow, in their old order.
+        // Vertices no triangle uses (welding can leave some) follow, in their old order. Every
+        // position id is some vertex's, so all of them are numbered here.
         for v in corners.copied().chain(0..vertices as u32) {
             if vertex_new[v as usize] == u32::MAX {
                 vertex_new[v as usize] = vertex_old.len() as u32;
                 vertex_old.push(v);
-                number(self.position_ids[v as usize] as usize, &mut position_new);
+                let p = self.position_ids[v as usize] as usize;
+                if position_new[p] == u32::MAX {
+                    position_new[p] = numbered;
+                    numbered += 1;
+                }
             }
-        }
-        // Ids are made from vertices, so every one is numbered by now; any other keeps the
-        // count whole.
-        for p in 0..positions {
-            number(p, &mut position_new);
         }
         WeldedMesh {
             grid_positions: gather_copy(&self.grid_positions, &vertex_old),

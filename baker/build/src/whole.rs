@@ -5,7 +5,7 @@ use crate::dag::{BuildStats, BuiltDag, Collected, DagOutput, Frame, StageClock};
 use crate::deviation::{part_sizes, Original};
 use crate::error::BakeError;
 use crate::levels::{groups, level0, Builder, Level0Edges, Prepared};
-use crate::partition::triangle_order;
+use crate::partition::numbered_in_triangle_order;
 use crate::progress::Progress;
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::weld::weld;
@@ -31,8 +31,7 @@ pub fn build_whole<O: DagOutput>(
     clock.lap(&mut stats, "weld");
     // The whole level-0 surface that errors are measured against, made beside the clusters.
     let measured = settings.error_bound == ErrorBound::Measured;
-    let order = triangle_order(&welded);
-    let welded = welded.numbered_by(&order);
+    let (welded, order) = numbered_in_triangle_order(welded);
     // The mesh's edges, sorted once: its open edges for the clusters, its locked positions.
     let edges = Level0Edges::new(&welded);
     // The part sizes and the first level's groups (METIS) are serial passes: beside the

@@ -63,8 +63,7 @@ impl Neighbours {
                 slots[b as usize].store(a / 3, Relaxed);
             }
         });
-        let across = slots.par_chunks(3).with_min_len(4096).map(|s| [0, 1, 2].map(|k| s[k].load(Relaxed))).collect();
-        Neighbours { across }
+        Neighbours::from_slots(slots)
     }
 
     /// [`Neighbours::new`] for ids below `positions`: each position's triangles listed once
@@ -110,8 +109,13 @@ impl Neighbours {
         // list and its triangles are read once for all of its edges.
         let slots: Vec<AtomicU32> = (0..corners.len()).map(|_| AtomicU32::new(NONE)).collect();
         (0..positions as u32).into_par_iter().with_min_len(1024).for_each(|p| lists.pair(corners, p, &slots));
+        Some(Neighbours::from_slots(slots))
+    }
+
+    /// The neighbours from their edge slots, three per triangle, each paired side by side.
+    fn from_slots(slots: Vec<AtomicU32>) -> Neighbours {
         let across = slots.par_chunks(3).with_min_len(4096).map(|s| [0, 1, 2].map(|k| s[k].load(Relaxed))).collect();
-        Some(Neighbours { across })
+        Neighbours { across }
     }
 
     /// From triangle `start` (of `tris`, the triangles this was made from), walks towards `p`
@@ -164,27 +168,37 @@ impl Lists<'_> {
         for &t in list {
             let first = 3 * t as usize;
             for (s, slot) in (first..).zip(&slots[first..first + 3]) {
-                let key = slot_key(corners, s);
-                let [low, far] = edge_ends(key);
-                if low != p {
-                    continue;
+                if edge_ends(slot_key(corners, s))[0] == p {
+                    slot.store(only_other(list, corners, s), Relaxed);
                 }
-                let (mut count, mut other) = (0, NONE);
-                for &u in list {
-                    let c = &corners[3 * u as usize..3 * u as usize + 3];
-                    // Only a triangle at the other end too has such a slot.
-                    if c[0] != far && c[1] != far && c[2] != far {
-                        continue;
-                    }
-                    for j in 3 * u as usize..3 * u as usize + 3 {
-                        if j != s && slot_key(corners, j) == key {
-                            (count, other) = (count + 1, u);
-                        }
-                    }
-                }
-                slot.store(if count == 1 { other } else { NONE }, Relaxed);
             }
         }
+    }
+}
+
+/// The triangle of the one other slot of `corners` with edge slot `s`'s key among the triangles
+/// of `list` (which holds every triangle at one end of that edge), if there is exactly one;
+/// else [`NONE`].
+fn only_other(list: &[u32], corners: &[u32], s: usize) -> u32 {
+    let key = slot_key(corners, s);
+    let far = edge_ends(key)[1];
+    let (mut count, mut other) = (0, NONE);
+    for &u in list {
+        let c = &corners[3 * u as usize..3 * u as usize + 3];
+        // Only a triangle at the other end too has such a slot.
+        if c[0] != far && c[1] != far && c[2] != far {
+            continue;
+        }
+        for j in (3 * u as usize..3 * u as usize + 3).filter(|&j| j != s) {
+            if slot_key(corners, j) == key {
+                (count, other) = (count + 1, u);
+            }
+        }
+    }
+    if count == 1 {
+        other
+    } else {
+        NONE
     }
 }
 
