@@ -1,15 +1,17 @@
 #!/usr/bin/env python3
-"""Independent checker for `.mres` files (format version 5).
+"""Independent checker for `.mres` files (format version 6).
 
 Written from docs/FORMAT.md alone, as a second implementation next to the Rust
 reader/validator: it reads every section with numpy, verifies checksums,
-references and ranges (spec section 7), decodes every page from its encoding
-(section 4.3) to the GPU layout and every cluster from that (section 5, with
-its open-edge marks), checks the DAG invariants the selection rule relies on
-(section 6), checks the marks of level 0 and of every group, checks that uniform
-and view-dependent cuts are crack-free by counting welded edges (unmarked uses
-even, marked uses at most one), cross-checks cut topology with trimesh (a cut's
-boundary edges are its marked edges) and measures cut-to-level-0 distances.
+references and ranges (spec section 7), decodes every page to its GPU layout
+(a compact page from its encoding, section 4.3; a layout page from its LZ4
+block, which must hold the canonical layout, section 4.4) and every cluster
+from that (section 5, with its open-edge marks), checks the DAG invariants the
+selection rule relies on (section 6), checks the marks of level 0 and of every
+group, checks that uniform and view-dependent cuts are crack-free by counting
+welded edges (unmarked uses even, marked uses at most one), cross-checks cut
+topology with trimesh (a cut's boundary edges are its marked edges) and
+measures cut-to-level-0 distances.
 
 Usage:
     check_mres.py FILE.mres [FILE.mres ...] [--source MESH] [--random-cuts N]
@@ -33,6 +35,7 @@ try:
     import blake3
     import zstandard
     import meshopt
+    import lz4.block
 except ImportError as exc:  # pragma: no cover - environment problem
     print(f"check_mres: missing dependency ({exc}); "
           "pip install -r scripts/requirements.txt", file=sys.stderr)
@@ -43,7 +46,7 @@ except ImportError as exc:  # pragma: no cover - environment problem
 # ---------------------------------------------------------------------------
 
 MAGIC = b"MRES"
-VERSION = 5
+VERSION = 6
 HEADER_SIZE = 160
 GROUP_SIZE = 40
 CLUSTER_SIZE = 16
@@ -56,7 +59,8 @@ NONE = 0xFFFFFFFF
 FLAG_NORMALS = 1
 FLAG_UVS = 2
 FLAG_MATERIALS = 4
-KNOWN_FLAGS = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS
+FLAG_LAYOUT_PAGES = 8  # every page is its GPU layout in one LZ4 block (section 4.4)
+KNOWN_FLAGS = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS | FLAG_LAYOUT_PAGES
 EDGE_OPEN = 1  # cluster header edge_flags bit 0: the cluster has an open-edge block
 
 # header bytes 0..112 (the checksum follows at 112, reserved at 144..160)
@@ -94,6 +98,15 @@ VIEW_H = 1080.0
 FOV_Y_DEG = 60.0
 
 MAX_EXAMPLES = 5
+
+# what the versions this checker rejects lacked (docs/FORMAT.md section 8)
+OLD_VERSIONS = {
+    1: "has no open-edge marks",
+    2: "stored pages in the GPU layout itself",
+    3: "stored every vertex of a page with residuals, without copies of repeated vertices",
+    4: "stored every vertex again that an earlier dependency page holds, without far copies",
+    5: "has no layout pages (header flag LAYOUT_PAGES)",
+}
 
 
 class Fatal(Exception):
@@ -483,6 +496,115 @@ def gpu_layout(clusters, flags):
     return b"".join(out) + b"".join(body)
 
 
+# ---------------------------------------------------------------------------
+# layout pages (spec section 4.4): the GPU layout (section 5) in one LZ4 block
+# ---------------------------------------------------------------------------
+
+BLOCKS = ("positions_offset", "normals_offset", "uvs_offset", "indices_offset", "materials_offset")
+
+
+def block_lengths(vc, tc, pbits, nbits, edge_flags, flags):
+    """Padded lengths of a cluster's five blocks (section 5, in BLOCKS order;
+    the indices block with its open-edge block, section 5.7) as its header's
+    counts and bit widths give them; None for a block the flags leave out."""
+    def words(bits):
+        return (bits + 31) // 32 * 4
+    marks = words(3 * tc) if edge_flags & EDGE_OPEN else 0
+    return [words(vc * sum(pbits)),
+            words(vc * sum(nbits)) if flags & FLAG_NORMALS else None,
+            4 * vc if flags & FLAG_UVS else None,
+            (3 * tc + 3) // 4 * 4 + marks,
+            (2 * tc + 3) // 4 * 4 if flags & FLAG_MATERIALS else None]
+
+
+def read_layout(raw, vcs, tcs, flags, normal_bits):
+    """The clusters of a layout page (section 4.4) read from its GPU layout
+    (section 5), as decode_encoded_page returns them. Checks what reading
+    needs (headers against the records and the bit width limits, blocks
+    inside the page, indices below vertex_count); whether the layout is the
+    canonical one is left to canonical_values and gpu_layout. Raises PageError."""
+    n = len(vcs)
+    if len(raw) < CLUSTER_HEADER_SIZE * n:
+        raise PageError(f"{n} cluster headers do not fit in its {len(raw)} bytes")
+    heads = np.frombuffer(raw, CHDR_DT, count=n)
+    words = np.frombuffer(pad4(raw) + bytes(8), "<u4")
+    out = []
+    for i, (h, vc, tc) in enumerate(zip(heads, vcs, tcs)):
+        try:
+            out.append(read_layout_cluster(raw, words, h, int(vc), int(tc), flags, normal_bits))
+        except PageError as exc:
+            raise PageError(f"cluster {i} of the page: {exc}") from None
+    return out
+
+
+def read_layout_cluster(raw, words, h, vc, tc, flags, normal_bits):
+    """One cluster of a layout page: header h (section 5.1) and the blocks it
+    points to (sections 5.2-5.8), every read inside the page."""
+    if not (1 <= vc <= 256 and 1 <= tc <= 128):
+        raise PageError(f"its record's counts {vc} vertices/{tc} triangles are outside 1..=256/1..=128")
+    if (int(h["vertex_count"]), int(h["triangle_count"])) != (vc, tc):
+        raise PageError(f"header counts {h['vertex_count']} vertices/{h['triangle_count']} triangles, its record "
+                        f"says {vc}/{tc}")
+    pbits, nbits, ef = h["position_bits"].tolist(), h["normal_bits"].tolist(), int(h["edge_flags"])
+    has_n = bool(flags & FLAG_NORMALS)
+    if max(pbits) > 32 or (has_n and max(nbits) > min(normal_bits, 16)):
+        raise PageError(f"position_bits {pbits} over 32 or normal_bits {nbits} over the header's {normal_bits}")
+    offs = [int(h[k]) for k in BLOCKS]
+    for name, at, length in zip(BLOCKS, offs, block_lengths(vc, tc, pbits, nbits, ef, flags)):
+        if length is not None and (at % 4 or at + length > len(raw)):
+            raise PageError(f"{name} {at}: its {length}-byte block is not word-aligned or runs past the page's "
+                            f"{len(raw)} bytes")
+    c = {"q": bit_values(words, offs[0], vc, pbits, h["position_min"].tolist())}
+    if has_n:
+        c["normals"] = bit_values(words, offs[1], vc, nbits, h["normal_min"].tolist())
+    if flags & FLAG_UVS:
+        uv = struct.unpack_from(f"<{2 * vc}H", raw, offs[2])
+        c["uvs"] = [list(uv[2 * v:2 * v + 2]) for v in range(vc)]
+    c["indices"] = list(raw[offs[3]:offs[3] + 3 * tc])
+    bad = [x for x in c["indices"] if x >= vc]
+    if bad:
+        raise PageError(f"index {bad[0]} >= vertex_count {vc}")
+    c["marks"] = [0] * tc
+    if ef & EDGE_OPEN:
+        c["marks"] = [m[0] for m in bit_values(words, offs[3] + (3 * tc + 3) // 4 * 4, tc, [3], [0])]
+    if flags & FLAG_MATERIALS:
+        c["materials"] = list(struct.unpack_from(f"<{tc}H", raw, offs[4]))
+    return c
+
+
+def bit_values(words, offset, count, widths, minimum):
+    """count records of len(widths) values from the bit stream (section 5.2)
+    at byte `offset`, each value plus its lane's minimum (python ints)."""
+    stride = sum(widths)
+    out = np.empty((count, len(widths)), dtype=np.int64)
+    at = np.arange(count, dtype=np.int64) * stride
+    for k, w in enumerate(widths):
+        out[:, k] = minimum[k] + read_bits(words, offset // 4, at, np.full(count, w, dtype=np.int64))
+        at = at + w
+    return out.tolist()
+
+
+def canonical_values(clusters, normal_bits, flags):
+    """What laying the values out again cannot see (section 4.4): vertices in
+    first-use order, each triangle as the index codec gives it back (section
+    4.3), octahedral values at most 2^normal_bits - 1 and grid coordinates
+    within i32 (section 5.3). Raises PageError."""
+    most = (1 << normal_bits) - 1
+    for i, c in enumerate(clusters):
+        where = f"cluster {i} of the page"
+        vc, tri = len(c["q"]), c["indices"]
+        if list(dict.fromkeys(tri + list(range(vc)))) != list(range(vc)):
+            raise PageError(f"{where}: vertices are not numbered in first-use order")
+        coded = meshopt.encode_index_buffer(np.array(tri, dtype=np.uint32))
+        if meshopt.decode_index_buffer(coded, len(tri), 4).astype(np.int64).tolist() != tri:
+            raise PageError(f"{where}: triangles are not as the index codec gives them back (corners rotated)")
+        top = max((max(v) for v in c.get("normals") or ()), default=0)
+        if flags & FLAG_NORMALS and top > most:
+            raise PageError(f"{where}: octahedral value {top} over 2^normal_bits - 1 = {most}")
+        if max((max(v) for v in c["q"]), default=0) >= 1 << 31:
+            raise PageError(f"{where}: a grid coordinate overflows i32")
+
+
 def count_frames(comp):
     """Number of concatenated zstd frames (informative)."""
     n = 0
@@ -549,20 +671,9 @@ class Checker:
          h_off, h_size, pt_off, pt_size) = struct.unpack_from(HEADER_FMT, d, 0)
         if magic != MAGIC:
             r.fatal("bad_magic", f"magic is {magic!r}, expected {MAGIC!r}")
-        if version == 1:
-            r.fatal("bad_version", f"version 1, this checker reads version {VERSION} only (version 1 has no "
-                                   "open-edge marks; re-bake the mesh with the current baker)")
-        if version == 2:
-            r.fatal("bad_version", f"version 2, this checker reads version {VERSION} only (version 2 stored "
-                                   "pages in the GPU layout itself; re-bake the mesh with the current baker)")
-        if version == 3:
-            r.fatal("bad_version", f"version 3, this checker reads version {VERSION} only (version 3 stored "
-                                   "every vertex of a page with residuals, without copies of repeated vertices; "
-                                   "re-bake the mesh with the current baker)")
-        if version == 4:
-            r.fatal("bad_version", f"version 4, this checker reads version {VERSION} only (version 4 stored "
-                                   "every vertex again that an earlier dependency page holds, without far copies; "
-                                   "re-bake the mesh with the current baker)")
+        if version in OLD_VERSIONS:
+            r.fatal("bad_version", f"version {version}, this checker reads version {VERSION} only (version {version} "
+                                   f"{OLD_VERSIONS[version]}; re-bake the mesh with the current baker)")
         if version != VERSION:
             r.fatal("bad_version", f"version {version}, this checker reads version {VERSION}")
         if header_size != HEADER_SIZE:
@@ -951,6 +1062,7 @@ class Checker:
         have_hdr = np.zeros(C, dtype=bool)
         pos = 0
         frames = []
+        layout = bool(self.flags & FLAG_LAYOUT_PAGES)
         for p in range(P):
             if not self.page_ok[p]:
                 continue
@@ -962,35 +1074,17 @@ class Checker:
             rs = int(self.prsize[p])
             first, n = int(self.pfirst[p]), int(self.pcount[p])
             vcs, tcs = self.cvc[first:first + n], self.ctc[first:first + n]
-            most = max_encoded_len(self.flags, vcs, tcs)
-            if most > MAX_ENCODED_SIZE:
-                r.violation("page_encoding", f"page {p}: its clusters could encode to {most} bytes (limit 32 MiB)")
+            if layout:
+                got = self.decode_layout_page(p, comp, rs, vcs, tcs)
+            else:
+                got = self.decode_compact_page(p, comp, vcs, tcs, decoded)
+            if got is None:
                 continue
-            try:
-                enc = decompress_frames(comp, most)
-            except zstandard.ZstdError as exc:
-                r.violation("page_decompress", f"page {p}: zstd error: {exc}")
-                continue
-            if len(enc) > most:
-                r.violation("page_decompress", f"page {p}: decompresses to more than the {most} bytes its counts allow")
-                continue
-            sources = self.page_sources(p)
-            missing = [q for q in sources if decoded[q] is None]
-            if missing:
-                r.violation("page_encoding", f"page {p}: its source page {missing[0]} (an earlier dependency it may "
-                                             "copy vertices from) did not decode")
-                continue
-            source_list = [v for q in sources for v in decoded[q]]
-            try:
-                clusters = decode_encoded_page(enc, vcs, tcs, self.flags, source_list)
-                raw = gpu_layout(clusters, self.flags)
-            except PageError as exc:
-                r.violation("page_encoding", f"page {p}: {exc}")
-                continue
+            clusters, raw = got
             if len(raw) != rs:
                 r.violation("page_raw_size", f"page {p}: decodes to a {len(raw)}-byte GPU layout, raw_size says {rs}")
                 continue
-            if len(frames) < 64:
+            if not layout and len(frames) < 64:
                 frames.append(count_frames(comp))
             if CLUSTER_HEADER_SIZE * n > rs:
                 r.violation("page_headers", f"page {p}: {n} cluster headers do not fit in {rs} bytes")
@@ -1012,14 +1106,74 @@ class Checker:
         self.page_base = base
         self.hdr = hdr
         self.have_hdr = have_hdr
-        r.figures["zstd_frames_per_page"] = sorted(set(frames))
+        r.figures["page_encoding"] = "layout" if layout else "compact"
+        if not layout:
+            r.figures["zstd_frames_per_page"] = sorted(set(frames))
         self._lap("decompress", t)
+
+    def decode_compact_page(self, p, comp, vcs, tcs, decoded):
+        """Page p's clusters and GPU layout from its zstd frames (section 4.3),
+        `decoded` holding its sources' vertices; None after a violation."""
+        r = self.r
+        most = max_encoded_len(self.flags, vcs, tcs)
+        if most > MAX_ENCODED_SIZE:
+            r.violation("page_encoding", f"page {p}: its clusters could encode to {most} bytes (limit 32 MiB)")
+            return None
+        try:
+            enc = decompress_frames(comp, most)
+        except zstandard.ZstdError as exc:
+            r.violation("page_decompress", f"page {p}: zstd error: {exc}")
+            return None
+        if len(enc) > most:
+            r.violation("page_decompress", f"page {p}: decompresses to more than the {most} bytes its counts allow")
+            return None
+        sources = self.page_sources(p)
+        missing = [q for q in sources if decoded[q] is None]
+        if missing:
+            r.violation("page_encoding", f"page {p}: its source page {missing[0]} (an earlier dependency it may "
+                                         "copy vertices from) did not decode")
+            return None
+        source_list = [v for q in sources for v in decoded[q]]
+        try:
+            clusters = decode_encoded_page(enc, vcs, tcs, self.flags, source_list)
+            return clusters, gpu_layout(clusters, self.flags)
+        except PageError as exc:
+            r.violation("page_encoding", f"page {p}: {exc}")
+            return None
+
+    def decode_layout_page(self, p, comp, rs, vcs, tcs):
+        """Page p's clusters and GPU layout from its LZ4 block (section 4.4):
+        exactly raw_size bytes, read back into values (read_layout) that lay
+        out again to the same bytes (the canonical layout); None after a
+        violation."""
+        r = self.r
+        try:
+            raw = lz4.block.decompress(comp, uncompressed_size=rs)
+        except lz4.block.LZ4BlockError as exc:
+            r.violation("page_decompress", f"page {p}: LZ4 error: {exc}")
+            return None
+        if len(raw) != rs:
+            r.violation("page_decompress", f"page {p}: its LZ4 block decompresses to {len(raw)} bytes, raw_size says {rs}")
+            return None
+        try:
+            clusters = read_layout(raw, vcs, tcs, self.flags, self.normal_bits)
+            canonical_values(clusters, self.normal_bits, self.flags)
+            again = gpu_layout(clusters, self.flags)
+        except PageError as exc:
+            r.violation("page_layout", f"page {p}: {exc}")
+            return None
+        if again != raw:
+            at = next((i for i, (a, b) in enumerate(zip(again, raw)) if a != b), min(len(again), len(raw)))
+            r.violation("page_layout", f"page {p}: not the canonical layout of its values (first differing byte {at})")
+            return None
+        return clusters, raw
 
     def page_sources(self, p):
         """Page p's sources (section 4.3): its dependencies before it, in the
-        array's order (none where its dependency range is out of bounds)."""
+        array's order (none where its dependency range is out of bounds, and
+        none in a file of layout pages, which decode alone: section 4.4)."""
         first, count = int(self.pdfirst[p]), int(self.pdcount[p])
-        if first + count > self.D:
+        if first + count > self.D or self.flags & FLAG_LAYOUT_PAGES:
             return []
         return [int(q) for q in self.deps[first:first + count] if q < p]
 
@@ -1866,8 +2020,8 @@ class Checker:
         f["pages"] = self.P
         f["groups"] = self.G
         f["clusters"] = self.C
-        f["flags"] = [n for b, n in ((FLAG_NORMALS, "normals"), (FLAG_UVS, "uvs"), (FLAG_MATERIALS, "materials"))
-                      if self.flags & b]
+        f["flags"] = [n for b, n in ((FLAG_NORMALS, "normals"), (FLAG_UVS, "uvs"), (FLAG_MATERIALS, "materials"),
+                                     (FLAG_LAYOUT_PAGES, "layout_pages")) if self.flags & b]
         f["grid_step"] = float(self.step)
         f["source_triangles"] = int(self.source_triangles)
         if not (self.complete and self.invariants_done):

@@ -4,7 +4,7 @@ Small meshes are generated and baked with the Rust tools (`mres generate`,
 `bake-all`); the checker must pass them, agree with `mres validate --json`, and
 catch corruptions made here byte by byte or by re-laying a page out with the
 small page codec below (holes, T-junctions, wrong open-edge marks, broken
-page encodings). Skipped when
+page encodings, layout pages that are not the canonical layout). Skipped when
 the Rust tools are not built (cargo build --release -p mres-cli).
 
 Run: .venv/bin/pytest scripts/test_check_mres.py -q
@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 import blake3
+import lz4.block
 import meshopt
 import numpy as np
 import pytest
@@ -365,7 +366,7 @@ def baked(tmp_path_factory):
     files = {k: out / f"{k}.mres" for k in ("sphere", "terrain", "boxes")}
     for f in files.values():
         assert f.exists(), f
-        assert struct.unpack_from("<I", f.read_bytes(), 4)[0] == 5, f"{f}: not format version 5 (stale build?)"
+        assert struct.unpack_from("<I", f.read_bytes(), 4)[0] == 6, f"{f}: not format version 6 (stale build?)"
     return d, files
 
 
@@ -875,7 +876,7 @@ def test_index_codec_garbage_is_rejected(baked):
 
 
 @pytest.mark.parametrize("version, why", [(1, "no open-edge marks"), (2, "re-bake"), (3, "re-bake"),
-                                          (4, "re-bake")])
+                                          (4, "re-bake"), (5, "no layout pages")])
 def test_an_older_version_is_rejected_with_a_clear_message(baked, version, why):
     def mutate(data):
         data[4] = version
@@ -950,3 +951,245 @@ def test_a_page_whose_source_fails_is_reported(paged):
     proc = run_checker(corrupted(paged, "sphere", "source-fails", mutate), *FAST)
     assert_caught(proc, "page_checksum")
     assert "did not decode" in proc.stdout, proc.stdout
+
+
+# --------------------------------------------------------------------------
+# layout pages (docs/FORMAT.md §4.4): the GPU layout (§5) in one LZ4 block
+# --------------------------------------------------------------------------
+
+FLAG_LAYOUT_PAGES = 8
+
+
+def bit_stream(values, lanes, lo=None):
+    """(per-lane minimum, fewest bits, bit stream §5.2) of values stored as
+    offsets from their minimum (§5: position_min/bits, normal_min/bits), or
+    from `lo` where a test gives one."""
+    lo = lo or [min(v[k] for v in values) for k in range(lanes)]
+    bits = [(max(v[k] for v in values) - lo[k]).bit_length() for k in range(lanes)]
+    acc = at = 0
+    for v in values:
+        for k in range(lanes):
+            acc |= (v[k] - lo[k]) << at
+            at += bits[k]
+    return lo, bits, acc.to_bytes((at + 31) // 32 * 4, "little")
+
+
+def layout_page(clusters, flags):
+    """A page's GPU layout (§5) from its clusters' values: 48-byte headers,
+    then all positions blocks, normals, UVs, indices (each with its open-edge
+    block, §5.7) and materials, each padded with zeros to 4 bytes."""
+    pad = lambda b: b + bytes(-len(b) % 4)  # noqa: E731
+    heads, blocks = [], []
+    for c in clusters:
+        pmin, pbits, pos = bit_stream(c["q"], 3, c.get("position_min"))
+        nmin, nbits, nrm = bit_stream(c["normals"], 2) if flags & FLAG_NORMALS else ([0, 0], [0, 0], None)
+        uvs = b"".join(struct.pack("<2H", *uv) for uv in c["uvs"]) if flags & FLAG_UVS else None
+        idx = bytes(c["indices"])
+        open_edges = int(any(c["marks"]))
+        if open_edges:
+            marks = sum(m << (3 * t) for t, m in enumerate(c["marks"]))  # 3 bits per triangle (§5.7)
+            idx = pad(idx) + marks.to_bytes((3 * len(c["marks"]) + 31) // 32 * 4, "little")
+        mat = struct.pack(f"<{len(c['materials'])}H", *c["materials"]) if flags & FLAG_MATERIALS else None
+        heads.append((len(c["q"]), len(c["indices"]) // 3, pmin, pbits, open_edges, nmin, nbits))
+        blocks.append([pos, nrm, uvs, idx, mat])
+    at, offsets, body = 48 * len(clusters), [[0] * 5 for _ in clusters], []
+    for kind in range(5):
+        for i, b in enumerate(blocks):
+            if b[kind] is not None:
+                offsets[i][kind] = at
+                body.append(pad(b[kind]))
+                at += len(body[-1])
+    out = b"".join(struct.pack("<2H3i4B5I2H2BH", vc, tc, *pmin, *pbits, ef, *offs, *nmin, *nbits, 0)
+                   for (vc, tc, pmin, pbits, ef, nmin, nbits), offs in zip(heads, offsets))
+    return out + b"".join(body)
+
+
+def layout_raw(data, p):
+    """Page p's GPU layout: its LZ4 block decompressed to raw_size bytes (§4.4)."""
+    rec = page(data, p)
+    return bytearray(lz4.block.decompress(bytes(data[rec["offset"]:rec["offset"] + rec["csize"]]),
+                                          uncompressed_size=rec["rsize"]))
+
+
+def store_layout(data, p, raw):
+    """Puts page p's layout `raw` back as one LZ4 block (raw_size kept)."""
+    store_page(data, p, lz4.block.compress(bytes(raw), store_size=False))
+
+
+CLUSTER_HEADER = {"position_min": (4, "<3i"), "normal_min": (40, "<2H"), "positions_offset": (20, "<I"),
+                  "indices_offset": (32, "<I")}  # §5.1: byte offset and type of a few fields
+
+
+def cluster_field(raw, i, name):
+    at, fmt = CLUSTER_HEADER[name]
+    return list(struct.unpack_from(fmt, raw, 48 * i + at))
+
+
+def set_cluster_field(raw, i, name, *values):
+    at, fmt = CLUSTER_HEADER[name]
+    struct.pack_into(fmt, raw, 48 * i + at, *values)
+
+
+def assert_layout_caught(proc, kind, message):
+    """Reported as `kind` with `message`, cleanly: no traceback, and no
+    exception the checker had to turn into a violation."""
+    assert_caught(proc, kind)
+    assert message in proc.stdout and "[checker_error]" not in proc.stdout, proc.stdout
+
+
+@pytest.fixture(scope="module")
+def layout(baked):
+    """The baked files repacked with layout pages (§4.4): (directory,
+    {name: path}), like `baked`."""
+    d, files = baked
+    out = {}
+    for name in ("sphere", "terrain"):
+        out[name] = d / f"{name}-layout.mres"
+        subprocess.run([str(MRES), "repack", str(files[name]), "--pages", "layout", "-o", str(out[name])],
+                       check=True, capture_output=True)
+        assert struct.unpack_from("<I", out[name].read_bytes(), 12)[0] & FLAG_LAYOUT_PAGES
+    return d, out
+
+
+def test_layout_pages_pass_and_agree_with_the_compact_file(baked, layout):
+    """A file of layout pages passes, agrees with `mres validate`, and gives
+    the figures of the compact file it was repacked from."""
+    names = list(layout[1])
+    proc = run_checker(*(layout[1][n] for n in names), *(baked[1][n] for n in names), "--json", *FAST)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    reports = [json.loads(line) for line in proc.stdout.splitlines() if line.strip()]
+    ignore = {"file", "bytes", "flags", "page_encoding", "zstd_frames_per_page", "timings", "seconds"}
+    for name, rep, compact in zip(names, reports, reports[len(names):]):
+        assert rep["ok"] and rep["page_encoding"] == "layout" and "layout_pages" in rep["flags"], rep
+        assert compact["page_encoding"] == "compact", compact
+        assert {k: v for k, v in rep.items() if k not in ignore} == {k: v for k, v in compact.items() if k not in ignore}
+        rust = json.loads(subprocess.run([str(MRES), "validate", str(layout[1][name]), "--json", "--random-cuts", "10"],
+                                         check=True, capture_output=True, text=True).stdout)
+        assert rust["violation_count"] == 0 and rep["uniform_cuts"] == rust["uniform_cuts"], rust
+        per_level = lambda r: [(x["level"], x["clusters"], x["groups"], x["triangles"]) for x in r["per_level"]]  # noqa: E731
+        assert (rep["levels"], rep["root_groups"], rep["root_clusters"], rep["pages"], per_level(rep)) == \
+            (rust["levels"], rust["root_groups"], rust["root_clusters"], rust["pages"], per_level(rust))
+
+
+def test_layout_writer_gives_the_repacked_layout(baked, layout):
+    """The test's layout writer lays out the compact file's decoded values
+    exactly as `mres repack` does (so the corruptions below change only what
+    they mean to)."""
+    for name in layout[1]:
+        compact, data = bytearray(baked[1][name].read_bytes()), bytearray(layout[1][name].read_bytes())
+        flags = struct.unpack_from("<I", compact, 12)[0]
+        decoded = {}
+        for p in range(header(data)["P"]):
+            assert layout_page(decode_page(compact, p, decoded), flags) == layout_raw(data, p), (name, p)
+
+
+def padding_byte(raw, data):
+    """The indices block's first padding byte (§5: blocks padded to 4 bytes)
+    of the first cluster of page 0 that has one."""
+    i = next(i for i in range(page(data, 0)["count"]) if 3 * cluster(data, i)["tc"] % 4)
+    raw[cluster_field(raw, i, "indices_offset")[0] + 3 * cluster(data, i)["tc"]] = 1
+
+
+def out_of_range_index(raw, data):
+    assert cluster(data, 0)["vc"] < 256
+    raw[cluster_field(raw, 0, "indices_offset")[0]] = cluster(data, 0)["vc"]
+
+
+def moved_block(raw, data):
+    set_cluster_field(raw, 0, "positions_offset", cluster_field(raw, 0, "positions_offset")[0] + 4)
+
+
+def normal_min_2000(raw, data):
+    """normal_min 2000 > 2^10 - 1: exact minima of values out of range."""
+    assert struct.unpack_from("<I", data, 48)[0] == 10 and struct.unpack_from("<I", data, 12)[0] & FLAG_NORMALS
+    set_cluster_field(raw, 0, "normal_min", 2000, cluster_field(raw, 0, "normal_min")[1])
+
+
+def position_overflow(raw, data):
+    """position_min at the i32 maximum: the exact minimum, but larger
+    coordinates overflow i32 (§5.3)."""
+    _, y, z = cluster_field(raw, 0, "position_min")
+    set_cluster_field(raw, 0, "position_min", (1 << 31) - 1, y, z)
+
+
+LAYOUT_EDITS = {  # which: (edit of page 0's layout, what the checker says)
+    "index": (out_of_range_index, "index {vc} >= vertex_count {vc}"),
+    "padding": (padding_byte, "not the canonical layout"),
+    "moved": (moved_block, "not the canonical layout"),
+    "normal_min": (normal_min_2000, "over 2^normal_bits - 1 = 1023"),
+    "overflow": (position_overflow, "overflows i32"),
+}
+
+
+@pytest.mark.parametrize("which", list(LAYOUT_EDITS))
+def test_bad_layout_page_is_rejected(baked, layout, which):
+    """A layout page with one field or byte changed (§4.4: not the canonical
+    layout, or not a layout at all), re-compressed and re-sealed."""
+    edit, message = LAYOUT_EDITS[which]
+
+    def mutate(data):
+        raw = layout_raw(data, 0)
+        edit(raw, data)
+        store_layout(data, 0, raw)
+    proc = run_on(layout, "sphere", f"layout-{which}", mutate)
+    vc = cluster(bytearray(layout[1]["sphere"].read_bytes()), 0)["vc"]
+    assert_layout_caught(proc, "page_layout", message.format(vc=vc))
+
+
+@pytest.mark.parametrize("which", ["truncated", "short"])
+def test_bad_lz4_block_is_rejected(layout, which):
+    """A truncated LZ4 block, and one that decompresses to raw_size - 4
+    bytes (§4.4: exactly raw_size)."""
+    def mutate(data):
+        rec = page(data, 0)
+        comp = bytes(data[rec["offset"]:rec["offset"] + rec["csize"]])
+        store_page(data, 0, comp[:-2] if which == "truncated" else
+                   lz4.block.compress(bytes(layout_raw(data, 0)[:-4]), store_size=False))
+    proc = run_on(layout, "sphere", f"lz4-{which}", mutate)
+    assert_layout_caught(proc, "page_decompress", "LZ4 error" if which == "truncated" else "its LZ4 block decompresses to")
+
+
+def rotated_triangle(c):
+    """Cluster c with one triangle's corners rotated (marks along) so that
+    the index codec does not give it back as stored; a triangle whose
+    vertices earlier triangles use, so that first-use order is kept."""
+    tri = c["indices"]
+    for t in range(1, len(tri) // 3):
+        if set(tri[3 * t:3 * t + 3]) <= set(tri[:3 * t]):
+            turned = tri[:3 * t] + tri[3 * t + 1:3 * t + 3] + [tri[3 * t]] + tri[3 * t + 3:]
+            if canonical(turned, [0] * (len(tri) // 3))[0] != turned:
+                m = c["marks"][t]
+                c["marks"][t] = sum(((m >> ((k + 1) % 3)) & 1) << k for k in range(3))
+                c["indices"] = turned
+                return
+    raise AssertionError("no triangle whose rotation the codec undoes")
+
+
+def relabelled(c):
+    """Cluster c with vertices 0 and 1 swapping numbers: not first-use order."""
+    for name in ("q", "normals", "uvs"):
+        if c[name]:
+            c[name][0], c[name][1] = c[name][1], c[name][0]
+    c["indices"] = [{0: 1, 1: 0}.get(x, x) for x in c["indices"]]
+
+
+def lowered_minimum(c):
+    """Cluster c's positions stored from a position_min 1 below their
+    minimum: a layout of the right values, but not the exact minimum (§5)."""
+    c["position_min"] = [min(v[0] for v in c["q"]) - 1] + [min(v[k] for v in c["q"]) for k in (1, 2)]
+
+
+@pytest.mark.parametrize("which, message", [("first_use", "not numbered in first-use order"),
+                                            ("rotated", "not as the index codec gives them back"),
+                                            ("minimum", "not the canonical layout")])
+def test_non_canonical_layout_of_the_values_is_rejected(baked, layout, which, message):
+    """Page 0 laid out by the writer above from cluster 0's values in an
+    order §4.4 does not allow (every other byte canonical), or with a
+    minimum that is not exact."""
+    def mutate(data):
+        compact = bytearray(baked[1]["sphere"].read_bytes())
+        cls = decode_page(compact, 0)
+        {"first_use": relabelled, "rotated": rotated_triangle, "minimum": lowered_minimum}[which](cls[0])
+        store_layout(data, 0, layout_page(cls, struct.unpack_from("<I", compact, 12)[0]))
+    proc = run_on(layout, "sphere", f"layout-{which}", mutate)
+    assert_layout_caught(proc, "page_layout", message)

@@ -1,13 +1,13 @@
 //! Shared by the `mres_reader_resealed` fuzz target and the `unseal` example: conversion
 //! between a real `.mres` file and an "unsealed" one whose pages are stored as their encoded
-//! bytes (`docs/FORMAT.md` §4.3, zstd undone) and whose checksums are not checked, so that a
+//! bytes (`docs/FORMAT.md` §4.3, zstd undone; layout pages, §4.4: their GPU layout, LZ4 undone) and whose checksums are not checked, so that a
 //! mutation of a hierarchy record, page-table field or encoded page byte reaches the reader's
 //! consistency checks and page decoder instead of being stopped by blake3 or zstd. A page
 //! record's `raw_size` (the size of the GPU layout its bytes decode to) is kept as it is. Field offsets are the reader's own (`mres_format::records`, which mirrors
 //! `docs/FORMAT.md` §2 and §4.1).
 
 use mres_format::records::{meta_checksum, HeaderRecord, PageRecord};
-use mres_format::{HEADER_SIZE, MAX_PAGE_ENCODED_SIZE, PAGE_RECORD_SIZE};
+use mres_format::{FLAG_LAYOUT_PAGES, HEADER_SIZE, MAX_PAGE_ENCODED_SIZE, PAGE_RECORD_SIZE};
 
 const PAGE_COUNT_AT: usize = HeaderRecord::PAGE_COUNT;
 const HIERARCHY_OFFSET_AT: usize = HeaderRecord::HIERARCHY_OFFSET;
@@ -18,6 +18,8 @@ const CHECKSUM_AT: usize = HeaderRecord::META_CHECKSUM;
 const REC_OFFSET: usize = PageRecord::OFFSET;
 const REC_COMPRESSED: usize = PageRecord::COMPRESSED_SIZE;
 const REC_CHECKSUM: usize = PageRecord::CHECKSUM;
+const REC_RAW: usize = PageRecord::RAW_SIZE;
+const FLAGS_AT: usize = HeaderRecord::FLAGS;
 
 fn u32_at(b: &[u8], at: usize) -> Option<u32> {
     Some(u32::from_le_bytes(b.get(at..at.checked_add(4)?)?.try_into().ok()?))
@@ -45,6 +47,21 @@ fn layout(b: &[u8]) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>, u
     Some((hierarchy, table, pages))
 }
 
+/// The header of `b` says its pages are layout pages (`docs/FORMAT.md` §4.4): stored as one
+/// LZ4 block each instead of zstd frames.
+fn layout_pages(b: &[u8]) -> bool {
+    u32_at(b, FLAGS_AT).is_some_and(|f| f & FLAG_LAYOUT_PAGES != 0)
+}
+
+/// A page's stored bytes from its unsealed ones: zstd level 1, or one LZ4 block for layout pages.
+fn compress(input: &[u8], raw: &[u8]) -> std::io::Result<Vec<u8>> {
+    if layout_pages(input) {
+        lz4::block::compress(raw, None, false)
+    } else {
+        zstd::bulk::compress(raw, 1)
+    }
+}
+
 /// Rewrites the header checksum over the header's first bytes, hierarchy and page table.
 fn seal_header(out: &mut [u8]) {
     let Some((hierarchy, table, _)) = layout(out) else { return };
@@ -66,7 +83,7 @@ pub fn seal(input: &[u8]) -> Vec<u8> {
             continue;
         };
         let Some(raw) = range(offset, size as u64, input.len()).map(|r| &input[r]) else { continue };
-        let Ok(frame) = zstd::bulk::compress(raw, 1) else { continue };
+        let Ok(frame) = compress(input, raw) else { continue };
         let at = out.len() as u64;
         out[rec + REC_OFFSET..rec + REC_OFFSET + 8].copy_from_slice(&at.to_le_bytes());
         out[rec + REC_COMPRESSED..rec + REC_COMPRESSED + 4].copy_from_slice(&(frame.len() as u32).to_le_bytes());
@@ -89,7 +106,12 @@ pub fn unseal(input: &[u8]) -> Option<Vec<u8>> {
         let offset = u64_at(input, rec + REC_OFFSET)?;
         let size = u32_at(input, rec + REC_COMPRESSED)?;
         let frame = &input[range(offset, size as u64, input.len())?];
-        let raw = zstd::bulk::decompress(frame, MAX_PAGE_ENCODED_SIZE).ok()?;
+        let raw = if layout_pages(input) {
+            let raw_size = u32_at(input, rec + REC_RAW)?;
+            lz4::block::decompress(frame, Some(raw_size as i32)).ok()?
+        } else {
+            zstd::bulk::decompress(frame, MAX_PAGE_ENCODED_SIZE).ok()?
+        };
         let at = out.len() as u64;
         out[rec + REC_OFFSET..rec + REC_OFFSET + 8].copy_from_slice(&at.to_le_bytes());
         out[rec + REC_COMPRESSED..rec + REC_COMPRESSED + 4].copy_from_slice(&(raw.len() as u32).to_le_bytes());

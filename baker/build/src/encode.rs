@@ -4,7 +4,7 @@
 
 use crate::dag::{BuiltCluster, BuiltDag, BuiltGroup, DagOutput, Frame};
 use crate::error::BakeError;
-use crate::settings::BakeSettings;
+use crate::settings::{BakeSettings, PageEncoding};
 use crate::weld::WeldedMesh;
 use mres_format::write::{write_encoded_with, EncodedCluster, PageCoding};
 use mres_format::{DagCluster, Group, Header, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS};
@@ -21,7 +21,11 @@ pub struct Encoder {
 impl Encoder {
     /// An encoder for clusters baked with `settings`.
     pub fn new(settings: &BakeSettings) -> Encoder {
-        let coding = if settings.independent_pages { PageCoding::Independent } else { PageCoding::FarCopies };
+        let coding = match (settings.page_encoding, settings.independent_pages) {
+            (PageEncoding::Layout, _) => PageCoding::Layout,
+            (PageEncoding::Compact, true) => PageCoding::Independent,
+            (PageEncoding::Compact, false) => PageCoding::FarCopies,
+        };
         Encoder {
             normal_bits: settings.normal_bits,
             position_bits: settings.position_bits,

@@ -15,6 +15,18 @@ pub enum ErrorBound {
     Simplifier,
 }
 
+/// How pages are stored (docs/FORMAT.md §4.3, §4.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PageEncoding {
+    /// Predicted and entropy-coded: the smallest files (about 5 B per input triangle on
+    /// scans), decoding at 100–200 MB of GPU layout per second per core.
+    Compact,
+    /// The GPU layout itself, one LZ4 block per page: about twice the bytes, decoding at
+    /// memory speed, every page alone (what a streamer that decodes on the fly wants).
+    Layout,
+}
+
 /// Settings of one bake. Each field says which step it feeds; [`BakeSettings::default`]
 /// gives the defaults and why.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -55,6 +67,9 @@ pub struct BakeSettings {
     /// (docs/FORMAT.md §4.3, far copies): larger files, for a reader that decodes pages out
     /// of file order.
     pub independent_pages: bool,
+    /// Write: how pages are stored, `"compact"` or `"layout"` (every page then decodes alone,
+    /// whatever `independent_pages` says).
+    pub page_encoding: PageEncoding,
 }
 
 impl Default for BakeSettings {
@@ -87,6 +102,9 @@ impl Default for BakeSettings {
             // Far copies store about half the vertices of a scan in a byte or two each; a
             // streamer holds a page's sources anyway (they are its coarser dependencies).
             independent_pages: false,
+            // Distribution and caches want the smaller files; `mres repack` turns them into
+            // layout pages where decode speed matters more than bytes.
+            page_encoding: PageEncoding::Compact,
         }
     }
 }

@@ -13,7 +13,7 @@ use meshopt::clusterlod::{clod_build, clod_default_config, ClodMesh};
 use mres_build::bake::bake;
 use mres_build::settings::BakeSettings;
 use mres_check::distance::{two_sided_with, Distance, Surface, Triangle};
-use mres_format::{select, MresFile, NO_GROUP};
+use mres_format::{select, write_mres_with, MresFile, PageCoding, FLAG_LAYOUT_PAGES, NO_GROUP};
 use mres_import::SourceMesh;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -86,6 +86,14 @@ pub struct BuilderRun {
     /// second, decoding every page of the file on one thread, best of three passes.
     #[serde(default)]
     pub decode_mb_per_s: f64,
+    /// The same file with layout pages (docs/FORMAT.md §4.4, `mres repack --pages layout`;
+    /// the file itself if it has them): its size, and its decoding speed measured as
+    /// `decode_mb_per_s` is.
+    #[serde(default)]
+    pub layout_bytes: u64,
+    /// See `layout_bytes`.
+    #[serde(default)]
+    pub layout_decode_mb_per_s: f64,
     /// Bounding-box diagonal of the input, the unit of every relative figure.
     #[serde(default)]
     pub diagonal: f64,
@@ -142,13 +150,19 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
     let dag_seconds =
         baked.stats.build.stage_seconds.iter().filter(|(s, _)| s != "write" && s != "encode").map(|(_, t)| t).sum();
     let file = MresFile::parse(baked.bytes)?;
+    // The bake's peak, before the repacking below.
+    let peak_rss_bytes = peak_rss();
+    let layout = match file.header.flags & FLAG_LAYOUT_PAGES {
+        0 => MresFile::parse(write_mres_with(&file.to_dag()?, settings.zstd_level, PageCoding::Layout)?)?,
+        _ => MresFile::parse(file.bytes().to_vec())?,
+    };
     let level0: Vec<_> = file.clusters.iter().filter(|c| c.own_group == NO_GROUP).collect();
     let level0_triangles = crate::batch::level0_triangles(&file);
     let run = BuilderRun {
         builder: "mres".into(),
         seconds,
         dag_seconds,
-        peak_rss_bytes: peak_rss(),
+        peak_rss_bytes,
         input_triangles,
         level0_triangles,
         degenerate_dropped: input_triangles.saturating_sub(level0_triangles),
@@ -157,6 +171,8 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
         level0_fill: level0.iter().map(|c| c.triangle_count as f64).sum::<f64>() / level0.len().max(1) as f64,
         bytes: file.file_size() as u64,
         decode_mb_per_s: decode_speed(&file)?,
+        layout_bytes: layout.file_size() as u64,
+        layout_decode_mb_per_s: decode_speed(&layout)?,
         diagonal,
         ..Default::default()
     };

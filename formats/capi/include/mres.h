@@ -53,6 +53,12 @@
 #define MRES_FLAG_MATERIALS 4
 
 /**
+ * Header flag: every page is stored as its GPU layout, one LZ4 block (docs/FORMAT.md §4.4):
+ * pages decode at memory speed and have no sources (each decodes alone).
+ */
+#define MRES_FLAG_LAYOUT_PAGES 8
+
+/**
  * `MresCluster::own_group` of a level-0 cluster.
  */
 #define MRES_NO_GROUP 4294967295
@@ -135,7 +141,8 @@ typedef struct MresInfo {
      */
     uint64_t file_size;
     /**
-     * Combination of `MRES_FLAG_NORMALS`, `MRES_FLAG_UVS`, `MRES_FLAG_MATERIALS`.
+     * Combination of `MRES_FLAG_NORMALS`, `MRES_FLAG_UVS`, `MRES_FLAG_MATERIALS`,
+     * `MRES_FLAG_LAYOUT_PAGES`.
      */
     uint32_t flags;
     /**
@@ -449,7 +456,7 @@ enum MresStatus mres_page_dependencies(const struct MresIndex *index,
 
 /**
  * Copies page `page`'s sources (the pages among its dependencies stored before it, ascending;
- * docs/FORMAT.md §4.3) into `out`, an array of `cap` elements, and stores their number in
+ * docs/FORMAT.md §4.3; none with `MRES_FLAG_LAYOUT_PAGES`) into `out`, an array of `cap` elements, and stores their number in
  * `*count`: the pages `mres_page_decode` takes, decoded, as its `sources`. Buffer rules as
  * for `mres_page_dependencies`.
  *

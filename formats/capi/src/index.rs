@@ -20,7 +20,8 @@ pub struct MresInfo {
     pub source_triangles: u64,
     /// Length of the whole file in bytes, as the page table implies.
     pub file_size: u64,
-    /// Combination of `MRES_FLAG_NORMALS`, `MRES_FLAG_UVS`, `MRES_FLAG_MATERIALS`.
+    /// Combination of `MRES_FLAG_NORMALS`, `MRES_FLAG_UVS`, `MRES_FLAG_MATERIALS`,
+    /// `MRES_FLAG_LAYOUT_PAGES`.
     pub flags: u32,
     /// Groups in the hierarchy.
     pub group_count: u32,
@@ -127,6 +128,9 @@ pub const MRES_FLAG_NORMALS: u32 = 1;
 pub const MRES_FLAG_UVS: u32 = 2;
 /// Header flag: clusters carry a material per triangle.
 pub const MRES_FLAG_MATERIALS: u32 = 4;
+/// Header flag: every page is stored as its GPU layout, one LZ4 block (docs/FORMAT.md §4.4):
+/// pages decode at memory speed and have no sources (each decodes alone).
+pub const MRES_FLAG_LAYOUT_PAGES: u32 = 8;
 /// `MresCluster::own_group` of a level-0 cluster.
 pub const MRES_NO_GROUP: u32 = 0xFFFF_FFFF;
 
@@ -134,6 +138,7 @@ pub const MRES_NO_GROUP: u32 = 0xFFFF_FFFF;
 const _: () = assert!(MRES_FLAG_NORMALS == format::FLAG_NORMALS);
 const _: () = assert!(MRES_FLAG_UVS == format::FLAG_UVS);
 const _: () = assert!(MRES_FLAG_MATERIALS == format::FLAG_MATERIALS);
+const _: () = assert!(MRES_FLAG_LAYOUT_PAGES == format::FLAG_LAYOUT_PAGES);
 const _: () = assert!(MRES_NO_GROUP == format::NO_GROUP);
 
 /// The `.mres` format version this library reads (files of any other version give
@@ -386,7 +391,7 @@ pub unsafe extern "C" fn mres_page_dependencies(
 }
 
 /// Copies page `page`'s sources (the pages among its dependencies stored before it, ascending;
-/// docs/FORMAT.md §4.3) into `out`, an array of `cap` elements, and stores their number in
+/// docs/FORMAT.md §4.3; none with `MRES_FLAG_LAYOUT_PAGES`) into `out`, an array of `cap` elements, and stores their number in
 /// `*count`: the pages `mres_page_decode` takes, decoded, as its `sources`. Buffer rules as
 /// for `mres_page_dependencies`.
 ///

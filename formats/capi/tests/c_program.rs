@@ -125,6 +125,12 @@ fn c_program_streams_the_file_and_agrees_with_the_rust_reader() {
     // The sample DAG: one page, every attribute.
     let sample = mres_format::write_mres(&mres_format::Dag::sample(), 3).expect("writes");
     assert_eq!(summary(&run(exe, &sample, "sample.mres")), expected(&sample));
+
+    // Layout pages (docs/FORMAT.md §4.4): no sources, the same GPU layouts (the hash).
+    let layout = mres_format::write_mres_with(&common::dag(), 3, mres_format::PageCoding::Layout).expect("writes");
+    let got = summary(&run(exe, &layout, "layout.mres"));
+    assert_eq!(got, expected(&layout));
+    assert_eq!((got["sources"].as_str(), &got["hash"]), ("0", &want["hash"]), "{got:?}");
 }
 
 /// Runs the C program on `bytes` and returns the status name it failed with.

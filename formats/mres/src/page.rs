@@ -5,7 +5,9 @@ use super::bits::{oct_decode, read_bits};
 use super::codec;
 use super::decode;
 use super::error::{corrupt, section, MresError};
+use super::layout_pages;
 use super::records::ClusterHeader;
+use super::write;
 use super::*;
 use std::cell::RefCell;
 
@@ -48,9 +50,11 @@ pub struct DecodedCluster {
     pub open_edges: Vec<u8>,
 }
 
-/// Page `p`'s sources (FORMAT.md §4.3): its dependencies stored before it, in order.
-pub(crate) fn sources(info: &PageInfo, p: u32) -> impl Iterator<Item = u32> + '_ {
-    info.dependencies.iter().copied().filter(move |&d| d < p)
+/// Page `p`'s sources (FORMAT.md §4.3): its dependencies stored before it, in order; none
+/// in a file of layout pages (`flags` with [`FLAG_LAYOUT_PAGES`], §4.4).
+pub(crate) fn sources(flags: u32, info: &PageInfo, p: u32) -> impl Iterator<Item = u32> + '_ {
+    let layout_pages = flags & FLAG_LAYOUT_PAGES != 0;
+    info.dependencies.iter().copied().filter(move |&d| d < p && !layout_pages)
 }
 
 /// Checks page `p`'s compressed bytes against its table entry (length, then checksum),
@@ -75,7 +79,13 @@ pub(crate) fn decompress_page(
         return Err(MresError::Checksum(format!("page {p}")));
     }
     let records = page_records(clusters, info, p)?;
-    let sources = source_pages(clusters, pages, p, layouts)?;
+    if header.flags & FLAG_LAYOUT_PAGES != 0 {
+        if !layouts.is_empty() {
+            return Err(MresError::SourceCount { page: p, given: layouts.len(), expected: 0 });
+        }
+        return layout_pages::decompress(header, records, p, compressed, info.raw_size as usize);
+    }
+    let sources = source_pages(header.flags, clusters, pages, p, layouts)?;
     // The counts bound the encoded size before anything is allocated; the capacity bounds the
     // output: zstd fails rather than write more.
     let most = codec::max_encoded_len(header.flags, records);
@@ -97,7 +107,9 @@ pub(crate) fn decompress_page(
         let raw_size = info.raw_size as usize;
         decode::decode_page_gpu(encoded, records, header.flags, header.normal_bits, raw_size, sources.as_deref())
             .map_err(|e| match e.0.as_str() {
-                decode::NEEDS_SOURCES => MresError::SourceCount { page: p, given: 0, expected: sources_of(info, p) },
+                decode::NEEDS_SOURCES => {
+                    MresError::SourceCount { page: p, given: 0, expected: sources_of(header.flags, info, p) }
+                }
                 _ => problem(e.0),
             })
     })
@@ -110,28 +122,29 @@ thread_local! {
 }
 
 /// The number of page `p`'s sources.
-fn sources_of(info: &PageInfo, p: u32) -> usize {
-    sources(info, p).count()
+fn sources_of(flags: u32, info: &PageInfo, p: u32) -> usize {
+    sources(flags, info, p).count()
 }
 
 /// Page `p`'s sources as the decoder reads them: `layouts`, checked to be one per source and
 /// each as long as its page's `raw_size`, with their pages' cluster records; `None` if none
 /// are given (a page without far copies decodes alone: FORMAT.md §4.3).
 fn source_pages<'a>(
+    flags: u32,
     clusters: &'a [ClusterInfo],
     pages: &'a [PageInfo],
     p: u32,
     layouts: &[&'a [u8]],
 ) -> Result<Option<Vec<decode::SourcePage<'a>>>, MresError> {
     let info = &pages[p as usize];
-    let expected = sources_of(info, p);
+    let expected = sources_of(flags, info, p);
     if layouts.is_empty() {
         return Ok(None);
     }
     if layouts.len() != expected {
         return Err(MresError::SourceCount { page: p, given: layouts.len(), expected });
     }
-    sources(info, p)
+    sources(flags, info, p)
         .zip(layouts)
         .map(|(s, &layout)| {
             let source = pages.get(s as usize).ok_or_else(|| corrupt(format!("page {p}: source {s} out of range")))?;
@@ -175,6 +188,13 @@ pub(crate) fn page_from_layout(
         decoded.push(cluster);
     }
     check_open_blocks(&headers, p)?;
+    if header.flags & FLAG_LAYOUT_PAGES != 0
+        && write::relaid(&bytes, &headers, header.flags, header.normal_bits).as_ref() != Some(&bytes)
+    {
+        return Err(corrupt(format!(
+            "page {p}: its layout is not the one the writer lays its values out to (FORMAT.md §4.4)"
+        )));
+    }
     Ok(Page { index: p, first_cluster: info.first_cluster, bytes, headers, clusters: decoded })
 }
 

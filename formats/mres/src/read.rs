@@ -104,9 +104,10 @@ impl MresIndex {
 
     /// Page `p`'s sources (FORMAT.md §4.3): the pages among its dependencies stored before it,
     /// ascending. Their vertices may be copied into page `p`, so decoding it needs their GPU
-    /// layouts ([`MresIndex::decode_page`]).
+    /// layouts ([`MresIndex::decode_page`]). None in a file of layout pages (§4.4): each
+    /// decodes alone.
     pub fn page_sources(&self, p: u32) -> Result<Vec<u32>, MresError> {
-        Ok(sources(page_info(&self.pages, p)?, p).collect())
+        Ok(sources(self.header.flags, page_info(&self.pages, p)?, p).collect())
     }
 
     /// Checks `compressed`, the bytes of [`MresIndex::page_range`] the caller fetched, against
@@ -172,7 +173,7 @@ impl MresFile {
         check_file_len(&pages, file_size, bytes.len() as u64)?;
         let mut is_source = vec![false; pages.len()];
         for (p, info) in pages.iter().enumerate() {
-            for s in sources(info, p as u32) {
+            for s in sources(header.flags, info, p as u32) {
                 is_source[s as usize] = true;
             }
         }
@@ -204,7 +205,7 @@ impl MresFile {
         let mut needed = vec![p];
         let mut seen = std::collections::BTreeSet::new();
         while let Some(q) = needed.pop() {
-            for s in sources(page_info(&self.pages, q)?, q) {
+            for s in sources(self.header.flags, page_info(&self.pages, q)?, q) {
                 if self.kept_layout(s).is_none() && seen.insert(s) {
                     needed.push(s);
                 }
@@ -231,7 +232,7 @@ impl MresFile {
     /// Decodes page `p`, whose sources are kept.
     fn decode_layout(&self, p: u32) -> Result<Vec<u8>, MresError> {
         let (info, frame) = self.frame(p)?;
-        let layouts: Vec<&[u8]> = sources(info, p)
+        let layouts: Vec<&[u8]> = sources(self.header.flags, info, p)
             .map(|s| self.kept_layout(s).map(Vec::as_slice).ok_or_else(|| corrupt(format!("page {p}: source {s}"))))
             .collect::<Result<_, _>>()?;
         decompress_page(&self.header, &self.clusters, &self.pages, p, frame, &layouts)
@@ -259,6 +260,22 @@ impl MresFile {
             return Err(corrupt(format!("pages hold {} clusters, hierarchy has {}", out.len(), self.clusters.len())));
         }
         Ok(out)
+    }
+
+    /// The file as the writer's [`Dag`], every page read and checked: writing it again with
+    /// the file's page coding gives the same bytes, and with another coding the same clusters,
+    /// groups and GPU layouts in other page bytes (what `mres repack` does).
+    pub fn to_dag(&self) -> Result<Dag, MresError> {
+        let decoded = self.decode_all()?;
+        Ok(Dag {
+            header: self.header,
+            groups: self.groups.clone(),
+            clusters: decoded
+                .into_iter()
+                .zip(&self.clusters)
+                .map(|(d, info)| DagCluster::from_decoded(d, info))
+                .collect(),
+        })
     }
 
     /// Page `p`'s table entry and compressed bytes.
@@ -310,7 +327,7 @@ fn check_header(r: &HeaderRecord) -> Result<(), MresError> {
 }
 
 fn check_quantization(r: &HeaderRecord) -> Result<(), MresError> {
-    if r.flags & !(FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS) != 0 {
+    if r.flags & !KNOWN_FLAGS != 0 {
         return Err(corrupt(format!("header: unknown flags {:#x}", r.flags)));
     }
     let finite = r.grid_origin.iter().chain(&r.uv_min).chain(&r.uv_extent).all(|v| v.is_finite());

@@ -4,6 +4,7 @@
 use super::bits::{bits_for, oct_encode, read_bits, BitWriter};
 use super::codec::{self, first_use_order, Quantized};
 use super::decode;
+use super::layout_pages;
 use super::records::{meta_checksum, ClusterHeader, ClusterRecord, GroupRecord, HeaderRecord, PageRecord};
 use super::*;
 use rayon::prelude::*;
@@ -38,6 +39,9 @@ pub enum PageCoding {
     FarCopies,
     /// No far copies: every page decodes alone (larger files).
     Independent,
+    /// Every page stored as its GPU layout, one LZ4 block (FORMAT.md §4.4, flag
+    /// [`FLAG_LAYOUT_PAGES`]): pages decode alone at memory speed, in about twice the bytes.
+    Layout,
 }
 
 /// Serializes `dag` to a complete `.mres` file; pages are compressed with zstd at `level`.
@@ -78,6 +82,8 @@ pub fn write_encoded_with(
     level: i32,
     coding: PageCoding,
 ) -> Result<Vec<u8>, WriteError> {
+    let layout_flag = if coding == PageCoding::Layout { FLAG_LAYOUT_PAGES } else { 0 };
+    let header = &Header { flags: (header.flags & !FLAG_LAYOUT_PAGES) | layout_flag, ..*header };
     let layout = Layout::new(groups, &encoded)?;
     let pages = page_spans(&layout, &encoded);
     let (groups, clusters) = renumber(&layout, &pages, groups, &encoded);
@@ -95,7 +101,7 @@ pub fn write_encoded_with(
             .enumerate()
             .map(|(p, d)| d.iter().copied().filter(|&s| (s as usize) < p).collect())
             .collect(),
-        PageCoding::Independent => vec![Vec::new(); pages.len()],
+        PageCoding::Independent | PageCoding::Layout => vec![Vec::new(); pages.len()],
     };
     let frames = compress_pages(header, &layout, &pages, &sources, encoded, level, &mut out)?;
     let table = encode_page_table(&pages, &dependencies, &frames);
@@ -377,6 +383,9 @@ fn compress_page(
     level: i32,
 ) -> Result<Vec<u8>, WriteError> {
     let (raw, _) = assemble_page(clusters);
+    if header.flags & FLAG_LAYOUT_PAGES != 0 {
+        return layout_page(raw, clusters, header);
+    }
     let quantized: Vec<Quantized> = clusters.iter().map(|c| c.quantized(header.flags)).collect();
     let index = codec::SourceIndex::new(sources.iter().map(|s| &s.keys));
     let codec_bug = || WriteError::BadDag("the page encoding does not decode to the page (a writer bug)".into());
@@ -413,6 +422,17 @@ fn compress_page(
         }
         Ok(out)
     })
+}
+
+/// A page stored as its layout `raw` (FORMAT.md §4.4), one LZ4 block, checked like
+/// [`compress_page`]'s: decompressed and checked as a reader does, it must give `raw` back.
+fn layout_page(raw: Vec<u8>, clusters: &[&EncodedCluster], header: &Header) -> Result<Vec<u8>, WriteError> {
+    let block = layout_pages::compress(&raw)?;
+    let back = layout_pages::decompress(header, &page_records(clusters), 0, &block, raw.len());
+    if back.ok() != Some(raw) {
+        return Err(WriteError::BadDag("the page's layout does not read back (a writer bug)".into()));
+    }
+    Ok(block)
 }
 
 thread_local! {
@@ -471,6 +491,36 @@ pub(crate) fn gpu_page(clusters: &[Quantized], flags: u32) -> Vec<u8> {
         .collect();
     let refs: Vec<&EncodedCluster> = encoded.iter().collect();
     assemble_page(&refs).0
+}
+
+/// A page's layout `raw` laid out again from the values it holds, as the writer lays out a
+/// page of them (FORMAT.md §4.4: a layout page must be exactly that); `headers` are its
+/// cluster headers, whose blocks [`layout_pages::check`] has found in place. `None` where the
+/// values are not what the writer stores: vertices not in first-use order, corners not as
+/// the index codec gives them back, octahedral values over `2^normal_bits − 1`.
+pub(crate) fn relaid(raw: &[u8], headers: &[ClusterHeader], flags: u32, normal_bits: u32) -> Option<Vec<u8>> {
+    let most = (1u32 << normal_bits) - 1;
+    let clusters: Vec<EncodedCluster> = headers
+        .iter()
+        .map(|h| {
+            let mut blocks: Blocks = Default::default();
+            for (slot, block) in blocks.iter_mut().enumerate() {
+                let at = h.block_offsets[slot] as usize;
+                if at != 0 {
+                    *block = Some(raw.get(at..at + layout_pages::block_len(slot, h))?.to_vec());
+                }
+            }
+            let q = EncodedCluster::from_blocks(0, NO_GROUP, *h, blocks).quantized(flags);
+            let v = q.positions.len();
+            let in_order = first_use_order(&q.indices, v).iter().enumerate().all(|(i, &o)| i == o as usize);
+            let canonical =
+                codec::canonical_triangles(&q.indices, &q.marks, v) == Some((q.indices.clone(), q.marks.clone()));
+            let in_range = q.normals.iter().flatten().all(|&n| n as u32 <= most);
+            let (header, blocks) = gpu_blocks(&q, flags);
+            (in_order && canonical && in_range).then(|| EncodedCluster::from_blocks(0, NO_GROUP, header, blocks))
+        })
+        .collect::<Option<_>>()?;
+    Some(assemble_page(&clusters.iter().collect::<Vec<_>>()).0)
 }
 
 /// One page's place: its clusters and groups (in the new order) and its decompressed size.

@@ -4,7 +4,7 @@
 
 use mres_format::{
     write_mres, write_mres_with, ClusterHeader, Dag, DagCluster, Grid, Group, Header, MresError, MresFile, MresIndex,
-    Page, PageCoding, Sphere, UvQuant, CLUSTER_HEADER_SIZE, FLAG_MATERIALS, HEADER_SIZE, NO_GROUP,
+    Page, PageCoding, Sphere, UvQuant, CLUSTER_HEADER_SIZE, FLAG_LAYOUT_PAGES, FLAG_MATERIALS, HEADER_SIZE, NO_GROUP,
 };
 
 fn sample_dag() -> Dag {
@@ -63,22 +63,27 @@ fn parse_and_decode(bytes: Vec<u8>) -> Result<(), MresError> {
 
 #[test]
 fn every_truncation_is_an_error() {
-    let bytes = write_mres(&sample_dag(), 3).unwrap();
-    for len in 0..bytes.len() {
-        let result = parse_and_decode(bytes[..len].to_vec());
-        assert!(result.is_err(), "truncated to {len} of {} bytes was accepted", bytes.len());
+    for coding in [PageCoding::FarCopies, PageCoding::Layout] {
+        let bytes = write_mres_with(&sample_dag(), 3, coding).unwrap();
+        for len in 0..bytes.len() {
+            let result = parse_and_decode(bytes[..len].to_vec());
+            assert!(result.is_err(), "{coding:?}: truncated to {len} of {} bytes was accepted", bytes.len());
+        }
+        assert!(parse_and_decode(bytes).is_ok());
     }
-    assert!(parse_and_decode(bytes).is_ok());
 }
 
 #[test]
 fn every_flipped_byte_is_an_error() {
-    let bytes = write_mres(&sample_dag(), 3).unwrap();
-    for at in 0..bytes.len() {
-        for mask in [0x01u8, 0x80, 0xff] {
-            let mut corrupt = bytes.clone();
-            corrupt[at] ^= mask;
-            assert!(parse_and_decode(corrupt).is_err(), "flipping byte {at} with {mask:#x} was accepted");
+    for coding in [PageCoding::FarCopies, PageCoding::Layout] {
+        let bytes = write_mres_with(&sample_dag(), 3, coding).unwrap();
+        for at in 0..bytes.len() {
+            for mask in [0x01u8, 0x80, 0xff] {
+                let mut corrupt = bytes.clone();
+                corrupt[at] ^= mask;
+                let result = parse_and_decode(corrupt);
+                assert!(result.is_err(), "{coding:?}: flipping byte {at} with {mask:#x} was accepted");
+            }
         }
     }
 }
@@ -99,12 +104,16 @@ fn typed_errors() {
     v[4] = 3;
     let error = MresFile::parse(v).unwrap_err();
     assert_eq!(error, MresError::WrongVersion { found: 3 });
-    assert_eq!(error.to_string(), "unsupported .mres version 3 (this reader reads version 5)");
+    assert_eq!(error.to_string(), "unsupported .mres version 3 (this reader reads version 6)");
     // Version 4 had no far copies (§8): its pages would decode, but it is refused like the rest.
     let mut v = bytes.clone();
     v[4] = 4;
     let error = MresFile::parse(v).unwrap_err();
     assert!(error.to_string().starts_with("unsupported .mres version 4"), "{error}");
+    // Version 5 had no layout pages (§8): refused, as its readers refuse version 6.
+    let mut v = bytes.clone();
+    v[4] = 5;
+    assert_eq!(MresFile::parse(v).unwrap_err(), MresError::WrongVersion { found: 5 });
     let mut v = bytes.clone();
     v[0] = b'X';
     assert_eq!(MresFile::parse(v).unwrap_err(), MresError::BadMagic);
@@ -432,16 +441,21 @@ fn the_file_length_must_match_the_page_table() {
 /// `encoded`, compressed and checksummed again, and the meta checksum fixed: a file whose only
 /// fault, if any, is in the encoding.
 fn with_encoded_page(bytes: &[u8], encoded: &[u8]) -> Vec<u8> {
+    with_page_bytes(bytes, &zstd::bulk::compress(encoded, 1).unwrap())
+}
+
+/// `bytes` (a one-page file) with its page's compressed bytes replaced by `frame`, the page
+/// record's size and checksum and the meta checksum fixed.
+fn with_page_bytes(bytes: &[u8], frame: &[u8]) -> Vec<u8> {
     use mres_format::records::{meta_checksum, PageRecord};
     let file = MresFile::parse(bytes.to_vec()).unwrap();
     assert_eq!(file.pages.len(), 1, "the sample is one page");
     let start = file.pages[0].offset as usize;
-    let frame = zstd::bulk::compress(encoded, 1).unwrap();
     let mut out = bytes[..start].to_vec();
-    out.extend_from_slice(&frame);
+    out.extend_from_slice(frame);
     let rec = start - mres_format::PAGE_RECORD_SIZE;
     out[rec + PageRecord::COMPRESSED_SIZE..][..4].copy_from_slice(&(frame.len() as u32).to_le_bytes());
-    out[rec + PageRecord::CHECKSUM..][..32].copy_from_slice(blake3::hash(&frame).as_bytes());
+    out[rec + PageRecord::CHECKSUM..][..32].copy_from_slice(blake3::hash(frame).as_bytes());
     let head: [u8; HEADER_SIZE] = out[..HEADER_SIZE].try_into().unwrap();
     let table = HEADER_SIZE + file.groups.len() * 40 + file.clusters.len() * 16;
     let sum = meta_checksum(&head, &out[HEADER_SIZE..table], &out[table..start]);
@@ -477,6 +491,91 @@ fn corrupt_page_encodings_are_errors_not_panics() {
             if at < length_bytes && !(at == 2 && flipped[2] <= 4) {
                 assert!(result.is_err(), "flipping preamble/length byte {at} with {mask:#x} was accepted");
             }
+        }
+    }
+}
+
+/// Layout pages (docs/FORMAT.md §4.4) hold the GPU layouts the compact pages decode to, each
+/// page alone; reading either file and writing the other encoding gives the other file, byte
+/// for byte (what `mres repack` does).
+#[test]
+fn layout_pages_hold_the_layouts_of_compact_pages() {
+    let dag = far_dag(120);
+    let compact = write_mres(&dag, 1).unwrap();
+    let layout = write_mres_with(&dag, 1, PageCoding::Layout).unwrap();
+    let index = index_of(&layout);
+    assert_eq!(index.header.flags, FLAG_MATERIALS | FLAG_LAYOUT_PAGES);
+    assert!(index.pages.len() >= 3);
+    assert!((0..index.pages.len() as u32).all(|p| index.page_sources(p).unwrap().is_empty()));
+    assert_eq!(decode_in_file_order(&layout), decode_in_file_order(&compact));
+    let read = |bytes: &[u8]| MresFile::parse(bytes.to_vec()).unwrap().to_dag().unwrap();
+    assert_eq!(write_mres(&read(&layout), 1).unwrap(), compact);
+    assert_eq!(write_mres_with(&read(&compact), 1, PageCoding::Layout).unwrap(), layout);
+    // A layout page takes no sources.
+    let r = index.page_range(1).unwrap();
+    let page = &layout[r.start as usize..r.end as usize];
+    let given = [&page[..0]];
+    assert_eq!(index.page_layout(1, page, &given), Err(MresError::SourceCount { page: 1, given: 1, expected: 0 }));
+}
+
+/// The sample's one page as a layout page: its layout, and the file with it replaced by `raw`.
+fn sample_layout() -> (Vec<u8>, Vec<u8>) {
+    let bytes = write_mres_with(&sample_dag(), 3, PageCoding::Layout).unwrap();
+    let raw = MresFile::parse(bytes.clone()).unwrap().page(0).unwrap();
+    (bytes, raw)
+}
+
+fn with_layout(bytes: &[u8], raw: &[u8]) -> Vec<u8> {
+    with_page_bytes(bytes, &lz4::block::compress(raw, None, false).unwrap())
+}
+
+/// The streaming reader's layout check of a layout page: the sample's page 0 with `raw` as its
+/// layout, through [`MresIndex::page_layout`].
+fn streamed_layout(bytes: &[u8], raw: &[u8]) -> Result<Vec<u8>, MresError> {
+    let file = with_layout(bytes, raw);
+    let index = index_of(&file);
+    let r = index.page_range(0).unwrap();
+    index.page_layout(0, &file[r.start as usize..r.end as usize], &[])
+}
+
+/// Past the checksums, a layout page's layout is checked: a layout of another length, an
+/// index out of range, nonzero padding or a block out of place is refused by the streaming
+/// reader; an octahedral value out of range by the whole-page decoder (which unpacks every
+/// value); no flipped byte panics.
+#[test]
+fn corrupt_layout_pages_are_errors_not_panics() {
+    let (bytes, raw) = sample_layout();
+    assert_eq!(streamed_layout(&bytes, &raw).unwrap(), raw, "resealing alone breaks nothing");
+    for len in 0..raw.len() {
+        assert!(streamed_layout(&bytes, &raw[..len]).is_err(), "layout cut to {len} bytes");
+    }
+    let header = |raw: &[u8], c: usize| {
+        ClusterHeader::decode(raw[c * CLUSTER_HEADER_SIZE..][..CLUSTER_HEADER_SIZE].try_into().unwrap())
+    };
+    let indices = header(&raw, 0).block_offsets[ClusterHeader::INDICES] as usize;
+    let mut bad = raw.clone();
+    bad[indices + 1] = 4; // cluster 0 has 4 vertices
+    let error = streamed_layout(&bytes, &bad).unwrap_err().to_string();
+    assert!(error.contains("local index out of range"), "{error}");
+    let mut bad = raw.clone();
+    bad[indices + 6] = 1; // the padding after 2 triangles' 6 indices
+    let error = streamed_layout(&bytes, &bad).unwrap_err().to_string();
+    assert!(error.contains("padding not zero"), "{error}");
+    let mut bad = raw.clone();
+    bad[ClusterHeader::POSITIONS_OFFSET] += 4;
+    let error = streamed_layout(&bytes, &bad).unwrap_err().to_string();
+    assert!(error.contains("the layout puts it at"), "{error}");
+    // normal_min 2000 with 10-bit normals: in place, but not a value the writer stores.
+    let mut bad = raw.clone();
+    bad[ClusterHeader::NORMAL_MIN..][..2].copy_from_slice(&2000u16.to_le_bytes());
+    assert!(streamed_layout(&bytes, &bad).is_ok());
+    let error = parse_and_decode(with_layout(&bytes, &bad)).unwrap_err().to_string();
+    assert!(error.contains("not the one the writer lays its values out to"), "{error}");
+    for at in 0..raw.len() {
+        for mask in [0x01u8, 0x80, 0xff] {
+            let mut flipped = raw.clone();
+            flipped[at] ^= mask;
+            let _ = parse_and_decode(with_layout(&bytes, &flipped));
         }
     }
 }

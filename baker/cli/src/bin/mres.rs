@@ -52,6 +52,12 @@ enum Command {
     /// distance to the input (mean and max, over uniform cuts; docs/BENCHMARKS.md, "Quality at
     /// equal measured error").
     Bench(BenchArgs),
+    /// Store a file's pages the other way, without baking again (docs/FORMAT.md §4.3, §4.4):
+    /// `--pages layout` stores each page's GPU layout in LZ4 (about twice the bytes; pages
+    /// decode at memory speed, each alone), `--pages compact` predicts and zstd-codes them (the
+    /// bake's default, the smallest files). Every page is read and checked first; clusters,
+    /// groups and their GPU layouts are unchanged, so every cut draws the same triangles.
+    Repack(RepackArgs),
     /// Maintain the bake cache of `bake-all`.
     Cache(CacheArgs),
     /// One builder run of `bench` (internal): prints a JSON BuilderRun.
@@ -139,6 +145,32 @@ struct BenchArgs {
     /// edge midpoints, thinned by an even stride); 0 skips the quality measure.
     #[arg(long, default_value_t = bench::DEFAULT_SAMPLES, value_name = "N")]
     samples: usize,
+}
+
+#[derive(Args)]
+struct RepackArgs {
+    /// The .mres file.
+    file: PathBuf,
+    /// How the output stores its pages.
+    #[arg(long, value_enum, value_name = "ENCODING")]
+    pages: PagesArg,
+    /// zstd level of compact pages (1..=22; pipeline.toml's `zstd_level`).
+    #[arg(long, default_value_t = 9, value_parser = clap::value_parser!(i32).range(1..=22))]
+    zstd_level: i32,
+    /// Output file (may be FILE itself: it is replaced whole once written).
+    #[arg(short, long, value_name = "FILE")]
+    output: PathBuf,
+}
+
+/// `--pages` of `mres repack`.
+#[derive(Clone, Copy, ValueEnum)]
+enum PagesArg {
+    /// Predicted and zstd-coded, decoding against the page's sources (the smallest files).
+    Compact,
+    /// Compact pages that each decode alone (no copies of their sources' vertices).
+    Independent,
+    /// The GPU layout in LZ4: decodes at memory speed, each page alone.
+    Layout,
 }
 
 #[derive(Args)]
@@ -274,7 +306,12 @@ impl<'a> Output<'a> {
             bail!("{}: is a directory", path.display());
         }
         let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        let tmp = tempfile::Builder::new()
+        let mut builder = tempfile::Builder::new();
+        // Read/write for everyone the umask lets through (as any new file), not the temporary
+        // file's owner-only default: the output is an ordinary file once renamed.
+        #[cfg(unix)]
+        builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+        let tmp = builder
             .prefix(".mres-output")
             .tempfile_in(dir)
             .with_context(|| format!("{}: cannot write in {}", path.display(), dir.display()))?;
@@ -309,6 +346,7 @@ fn main() -> ExitCode {
         Command::Inspect(a) => inspect_cmd(a),
         Command::Export(a) => export_cmd(a),
         Command::Bench(a) => bench_cmd(a),
+        Command::Repack(a) => repack_cmd(a),
         Command::Cache(a) => cache_cmd(a),
         Command::BenchChild(a) => bench_child_cmd(a),
         Command::Generate(a) => generate_cmd(a),
@@ -442,6 +480,31 @@ fn export_cmd(a: ExportArgs) -> Result<ExitCode> {
     let names = mres_cli::export::material_names_for(&a.file)?;
     write_obj_named(&mesh, &names, out)?;
     eprintln!("{}: {} clusters, {} triangles", a.output.display(), cut.len(), mesh.triangle_count());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn repack_cmd(a: RepackArgs) -> Result<ExitCode> {
+    use mres_format::PageCoding;
+    let out = Output::create(&a.output)?;
+    let f = open(&a.file)?;
+    let dag = f.to_dag().with_context(|| format!("{}", a.file.display()))?;
+    let coding = match a.pages {
+        PagesArg::Compact => PageCoding::FarCopies,
+        PagesArg::Independent => PageCoding::Independent,
+        PagesArg::Layout => PageCoding::Layout,
+    };
+    let bytes =
+        mres_format::write_mres_with(&dag, a.zstd_level, coding).with_context(|| format!("{}", a.file.display()))?;
+    std::fs::write(out.tmp.path(), &bytes).with_context(|| format!("{}", a.output.display()))?;
+    out.finish()?;
+    eprintln!(
+        "{}: {} pages, {} -> {} bytes ({:.2} B per input triangle)",
+        a.output.display(),
+        f.pages.len(),
+        f.file_size(),
+        bytes.len(),
+        bytes.len() as f64 / f.header.source_triangles.max(1) as f64
+    );
     Ok(ExitCode::SUCCESS)
 }
 
@@ -622,9 +685,12 @@ fn print_bench(a: &BenchArgs, r: &Report) {
             r.level0_triangles,
             if r.bytes > 0 {
                 format!(
-                    "  file {:.2} B/input tri, pages decode at {:.0} MB/s of GPU layout (1 thread)",
+                    "  file {:.2} B/input tri, pages decode at {:.0} MB/s of GPU layout (1 thread); \
+                     as layout pages {:.2} B/input tri at {:.0} MB/s",
                     r.bytes as f64 / r.input_triangles.max(1) as f64,
-                    r.decode_mb_per_s
+                    r.decode_mb_per_s,
+                    r.layout_bytes as f64 / r.input_triangles.max(1) as f64,
+                    r.layout_decode_mb_per_s
                 )
             } else {
                 String::new()

@@ -176,6 +176,31 @@ fn output_is_identical_for_any_thread_count() {
     assert_eq!(one, bake_with(1), "repeat run");
 }
 
+/// `page_encoding = "layout"` stores every page as its GPU layout (docs/FORMAT.md §4.4): the
+/// default bake's layouts, each page decoding alone, in more bytes; the same bytes at any
+/// thread count.
+#[test]
+fn layout_pages_hold_the_default_bakes_layouts() {
+    let mesh = || generate::sphere(60);
+    let compact = MresFile::parse(bake(mesh())).unwrap();
+    let settings = BakeSettings { page_encoding: mres_build::settings::PageEncoding::Layout, ..Default::default() };
+    let bake_with = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| bake_source(mesh(), &settings, &|_| {}).expect("bake").bytes)
+    };
+    let layout = bake_with(1);
+    assert_eq!(layout, bake_with(4));
+    assert!(layout.len() > compact.file_size());
+    let index = MresIndex::parse(&layout).unwrap();
+    assert_eq!(index.header.flags & mres_format::FLAG_LAYOUT_PAGES, mres_format::FLAG_LAYOUT_PAGES);
+    assert!(compact.pages.len() > 1 && index.pages.len() == compact.pages.len());
+    for p in 0..index.pages.len() as u32 {
+        let r = index.page_range(p).unwrap();
+        let page = index.decode_page(p, &layout[r.start as usize..r.end as usize], &[]).expect("decodes alone");
+        assert_eq!(page.bytes, compact.page(p).unwrap(), "page {p}: the same GPU layout");
+    }
+}
+
 /// `independent_pages = true` writes no far copy (docs/FORMAT.md §4.3): every page decodes
 /// alone, to the same GPU layout as the default bake's, which has pages that need their
 /// sources and is smaller.
