@@ -499,7 +499,9 @@ pub(crate) fn gpu_page(clusters: &[Quantized], flags: u32) -> Vec<u8> {
 /// values are not what the writer stores: vertices not in first-use order, corners not as
 /// the index codec gives them back, octahedral values over `2^normal_bits − 1`.
 pub(crate) fn relaid(raw: &[u8], headers: &[ClusterHeader], flags: u32, normal_bits: u32) -> Option<Vec<u8>> {
-    let most = (1u32 << normal_bits) - 1;
+    // `normal_bits` is 4..=16 in a file with normals and unchecked in one without (which has
+    // no octahedral values to bound), so the shift is done wide.
+    let most = (1u64 << normal_bits.min(32)) - 1;
     let clusters: Vec<EncodedCluster> = headers
         .iter()
         .map(|h| {
@@ -515,7 +517,7 @@ pub(crate) fn relaid(raw: &[u8], headers: &[ClusterHeader], flags: u32, normal_b
             let in_order = first_use_order(&q.indices, v).iter().enumerate().all(|(i, &o)| i == o as usize);
             let canonical =
                 codec::canonical_triangles(&q.indices, &q.marks, v) == Some((q.indices.clone(), q.marks.clone()));
-            let in_range = q.normals.iter().flatten().all(|&n| n as u32 <= most);
+            let in_range = q.normals.iter().flatten().all(|&n| n as u64 <= most);
             let (header, blocks) = gpu_blocks(&q, flags);
             (in_order && canonical && in_range).then(|| EncodedCluster::from_blocks(0, NO_GROUP, header, blocks))
         })

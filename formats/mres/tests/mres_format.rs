@@ -579,3 +579,23 @@ fn corrupt_layout_pages_are_errors_not_panics() {
         }
     }
 }
+
+/// `normal_bits` means nothing in a file without normals (docs/FORMAT.md §2), so any value there
+/// reads: a layout-page file with 40 in it decodes as with 0 (found by fuzzing: the canonical
+/// check shifted by it).
+#[test]
+fn normal_bits_of_a_file_without_normals_are_ignored() {
+    use mres_format::records::{meta_checksum, HeaderRecord};
+    let bytes = write_mres_with(&multi_page_dag(8), 1, PageCoding::Layout).unwrap();
+    let expected = MresFile::parse(bytes.clone()).unwrap().decode_all().unwrap();
+    let mut v = bytes;
+    v[HeaderRecord::NORMAL_BITS..][..4].copy_from_slice(&40u32.to_le_bytes());
+    let file = MresFile::parse(v.clone()).unwrap_err();
+    assert!(matches!(file, MresError::Checksum(_)), "{file}");
+    let table = u64::from_le_bytes(v[96..104].try_into().unwrap()) as usize;
+    let table_end = table + u64::from_le_bytes(v[104..112].try_into().unwrap()) as usize;
+    let head: [u8; HEADER_SIZE] = v[..HEADER_SIZE].try_into().unwrap();
+    let sum = meta_checksum(&head, &v[HEADER_SIZE..table], &v[table..table_end]);
+    v[112..144].copy_from_slice(&sum);
+    assert_eq!(MresFile::parse(v).unwrap().decode_all().unwrap(), expected);
+}
