@@ -104,6 +104,8 @@ pub struct Summary {
     pub root_clusters: u64,
     /// Pages.
     pub pages: u64,
+    /// How the pages are stored: `"compact"` (docs/FORMAT.md §4.3) or `"layout"` (§4.4).
+    pub page_encoding: &'static str,
     /// Decompressed size of all pages, bytes.
     pub raw_page_bytes: u64,
     /// Per level, finest first.
@@ -251,6 +253,7 @@ pub fn summarize(file: &MresFile) -> Result<Summary, MresError> {
         level0_clusters: file.clusters.iter().filter(|c| c.own_group == NO_GROUP).count() as u64,
         root_clusters: roots().map(|g| g.cluster_count as u64).sum(),
         pages: file.pages.len() as u64,
+        page_encoding: if h.flags & mres_format::FLAG_LAYOUT_PAGES != 0 { "layout" } else { "compact" },
         raw_page_bytes: file.pages.iter().map(|p| p.raw_size as u64).sum(),
         per_level: per_level(file, diagonal),
         uniform_cuts: CUT_FRACTIONS
@@ -320,9 +323,10 @@ impl Summary {
         .collect();
         let _ = writeln!(
             s,
-            "  size        {} bytes in {} pages ({} bytes decompressed), format version {}",
+            "  size        {} bytes in {} {} pages ({} bytes decompressed), format version {}",
             count(self.file_bytes),
             count(self.pages),
+            self.page_encoding,
             count(self.raw_page_bytes),
             self.format_version
         );

@@ -343,6 +343,9 @@ fn repack_to_layout_pages_and_back_is_exact() {
     assert_eq!(flags(&laid), flags(&compact) | mres_format::FLAG_LAYOUT_PAGES);
     let v = run(MRES, &["validate", l, "--random-cuts", "50"]);
     assert!(v.status.success(), "{}", text(&v));
+    let i = run(MRES, &["inspect", l, "--json"]);
+    let summary: serde_json::Value = serde_json::from_slice(&i.stdout).unwrap();
+    assert_eq!(summary["page_encoding"], "layout", "{}", text(&i));
     let dag = |bytes: Vec<u8>| mres_format::MresFile::parse(bytes).unwrap().to_dag().unwrap().clusters;
     assert_eq!(dag(laid), dag(compact.clone()));
     let o = run(MRES, &["repack", l, "--pages", "compact", "-o", k]);
