@@ -13,7 +13,7 @@ use meshopt::clusterlod::{clod_build, clod_default_config, ClodMesh};
 use mres_build::bake::bake;
 use mres_build::settings::BakeSettings;
 use mres_check::distance::{two_sided_with, Distance, Surface, Triangle};
-use mres_format::{select, write_mres_with, MresFile, PageCoding, FLAG_LAYOUT_PAGES, NO_GROUP};
+use mres_format::{rewrite, select, MresFile, PageCoding, FLAG_LAYOUT_PAGES, NO_GROUP};
 use mres_import::SourceMesh;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -153,7 +153,7 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
     // The bake's peak, before the repacking below.
     let peak_rss_bytes = peak_rss();
     let layout = match file.header.flags & FLAG_LAYOUT_PAGES {
-        0 => MresFile::parse(write_mres_with(&file.to_dag()?, settings.zstd_level, PageCoding::Layout)?)?,
+        0 => MresFile::parse(rewrite(&file, settings.zstd_level, PageCoding::Layout)?)?,
         _ => MresFile::parse(file.bytes().to_vec())?,
     };
     let level0: Vec<_> = file.clusters.iter().filter(|c| c.own_group == NO_GROUP).collect();

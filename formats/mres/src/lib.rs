@@ -74,7 +74,7 @@ pub use page::{DecodedCluster, Page};
 pub use read::{MresError, MresFile, MresIndex};
 pub use records::ClusterHeader;
 pub use select::{uniform_cut, view_cut, ViewParams};
-pub use write::{write_mres, write_mres_with, PageCoding};
+pub use write::{rewrite, write_mres, write_mres_with, PageCoding};
 
 /// File magic, the first four bytes.
 pub const MAGIC: [u8; 4] = *b"MRES";
@@ -301,7 +301,9 @@ pub struct DagCluster {
 
 impl DagCluster {
     /// The writer's form of a cluster read back from a file (decoded data and its hierarchy
-    /// record): writing it again gives the same bytes.
+    /// record). Writing it again gives the same bytes only where its decoded normals and UVs
+    /// quantize back to the stored values, which floats do not promise (a few per page differ
+    /// by one step); [`write::rewrite`] rewrites a file exactly.
     pub fn from_decoded(d: DecodedCluster, info: &ClusterInfo) -> DagCluster {
         DagCluster {
             group: info.group,

@@ -262,22 +262,6 @@ impl MresFile {
         Ok(out)
     }
 
-    /// The file as the writer's [`Dag`], every page read and checked: writing it again with
-    /// the file's page coding gives the same bytes, and with another coding the same clusters,
-    /// groups and GPU layouts in other page bytes (what `mres repack` does).
-    pub fn to_dag(&self) -> Result<Dag, MresError> {
-        let decoded = self.decode_all()?;
-        Ok(Dag {
-            header: self.header,
-            groups: self.groups.clone(),
-            clusters: decoded
-                .into_iter()
-                .zip(&self.clusters)
-                .map(|(d, info)| DagCluster::from_decoded(d, info))
-                .collect(),
-        })
-    }
-
     /// Page `p`'s table entry and compressed bytes.
     fn frame(&self, p: u32) -> Result<(&PageInfo, &[u8]), MresError> {
         let info = page_info(&self.pages, p)?;

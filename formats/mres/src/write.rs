@@ -28,6 +28,9 @@ pub enum WriteError {
     /// zstd failed.
     #[error("zstd: {0}")]
     Compress(#[from] std::io::Error),
+    /// The file being rewritten ([`rewrite`]) does not read.
+    #[error("{0}")]
+    Read(#[from] MresError),
 }
 
 /// How pages are encoded (FORMAT.md §4.3).
@@ -114,6 +117,38 @@ pub fn write_encoded_with(
     out[HEADER_SIZE..][..hierarchy.len()].copy_from_slice(&hierarchy);
     out[page_table_offset as usize..][..table.len()].copy_from_slice(&table);
     Ok(out)
+}
+
+/// `file` written again with its pages stored as `coding` says (what `mres repack` does): the
+/// same groups, clusters and GPU layouts, byte for byte, in other page bytes. Each cluster is
+/// taken from its page's layout as stored (every page read and checked first: a layout page
+/// must be canonical, FORMAT.md §4.4), never through decoded floats, whose normals and UVs
+/// would quantize back only nearly. Rewriting a file with its own coding and zstd level
+/// gives its bytes.
+pub fn rewrite(file: &MresFile, level: i32, coding: PageCoding) -> Result<Vec<u8>, WriteError> {
+    let mut clusters = Vec::with_capacity(file.clusters.len());
+    for (p, info) in file.pages.iter().enumerate() {
+        let layout = file.decode_page(p as u32)?.bytes;
+        let first = info.first_cluster as usize;
+        // The reader checked every header and block, so these reads cannot miss; if one did,
+        // it is an error, not a panic.
+        let missing = || WriteError::BadDag(format!("page {p}: a cluster's blocks are not where its header says"));
+        let records = file.clusters.get(first..first + info.cluster_count as usize).ok_or_else(missing)?;
+        for (i, record) in records.iter().enumerate() {
+            let head = layout.get(i * CLUSTER_HEADER_SIZE..).and_then(|h| h.first_chunk()).ok_or_else(missing)?;
+            let head = ClusterHeader::decode(head);
+            let mut blocks: Blocks = Default::default();
+            for (slot, block) in blocks.iter_mut().enumerate() {
+                let at = head.block_offsets[slot] as usize;
+                if at != 0 {
+                    let bytes = layout.get(at..at + layout_pages::block_len(slot, &head)).ok_or_else(missing)?;
+                    *block = Some(bytes.to_vec());
+                }
+            }
+            clusters.push(EncodedCluster::from_blocks(record.group, record.own_group, head, blocks));
+        }
+    }
+    write_encoded_with(&file.header, &file.groups, clusters, level, coding)
 }
 
 /// The header record of a file with these counts and section sizes; its checksum is left zero.

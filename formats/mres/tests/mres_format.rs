@@ -3,8 +3,9 @@
 //! decodes exactly what the whole-file reader does.
 
 use mres_format::{
-    write_mres, write_mres_with, ClusterHeader, Dag, DagCluster, Grid, Group, Header, MresError, MresFile, MresIndex,
-    Page, PageCoding, Sphere, UvQuant, CLUSTER_HEADER_SIZE, FLAG_LAYOUT_PAGES, FLAG_MATERIALS, HEADER_SIZE, NO_GROUP,
+    rewrite, write_mres, write_mres_with, ClusterHeader, Dag, DagCluster, Grid, Group, Header, MresError, MresFile,
+    MresIndex, Page, PageCoding, Sphere, UvQuant, CLUSTER_HEADER_SIZE, FLAG_LAYOUT_PAGES, FLAG_MATERIALS, HEADER_SIZE,
+    NO_GROUP,
 };
 
 fn sample_dag() -> Dag {
@@ -495,22 +496,54 @@ fn corrupt_page_encodings_are_errors_not_panics() {
     }
 }
 
+/// [`far_dag`] with normals and UVs that are not exactly representable (pseudo-random): their
+/// decoded floats would quantize back only nearly.
+fn far_dag_with_normals(n: u32) -> Dag {
+    let mut dag = far_dag(n);
+    dag.header.flags |= mres_format::FLAG_NORMALS | mres_format::FLAG_UVS;
+    dag.header.normal_bits = 10;
+    dag.header.uv = UvQuant { min: [0.0; 2], extent: [1.0; 2] };
+    let mut state = 0x9e37_79b9u32;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        (state >> 8) as f32 / (1u32 << 24) as f32
+    };
+    for c in &mut dag.clusters {
+        c.normals = (0..c.positions.len())
+            .map(|_| {
+                let v = [next() - 0.5, next() - 0.5, next() - 0.5 + 1e-3];
+                let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                v.map(|x| x / len)
+            })
+            .collect();
+        c.uvs = (0..c.positions.len()).map(|_| [next(), next()]).collect();
+    }
+    dag
+}
+
 /// Layout pages (docs/FORMAT.md §4.4) hold the GPU layouts the compact pages decode to, each
-/// page alone; reading either file and writing the other encoding gives the other file, byte
-/// for byte (what `mres repack` does).
+/// page alone; rewriting either file with the other encoding gives the other file, byte for
+/// byte (what `mres repack` does), normals and UVs included.
 #[test]
 fn layout_pages_hold_the_layouts_of_compact_pages() {
+    for (dag, flags) in [(far_dag(120), FLAG_MATERIALS), (far_dag_with_normals(40), FLAG_MATERIALS | 3)] {
+        let compact = write_mres(&dag, 1).unwrap();
+        let layout = write_mres_with(&dag, 1, PageCoding::Layout).unwrap();
+        let index = index_of(&layout);
+        assert_eq!(index.header.flags, flags | FLAG_LAYOUT_PAGES);
+        assert!(index.pages.len() >= 3);
+        assert!((0..index.pages.len() as u32).all(|p| index.page_sources(p).unwrap().is_empty()));
+        assert_eq!(decode_in_file_order(&layout), decode_in_file_order(&compact));
+        let read = |bytes: &[u8]| MresFile::parse(bytes.to_vec()).unwrap();
+        assert_eq!(rewrite(&read(&layout), 1, PageCoding::FarCopies).unwrap(), compact);
+        assert_eq!(rewrite(&read(&compact), 1, PageCoding::Layout).unwrap(), layout);
+        assert_eq!(rewrite(&read(&compact), 1, PageCoding::FarCopies).unwrap(), compact);
+    }
     let dag = far_dag(120);
-    let compact = write_mres(&dag, 1).unwrap();
     let layout = write_mres_with(&dag, 1, PageCoding::Layout).unwrap();
     let index = index_of(&layout);
-    assert_eq!(index.header.flags, FLAG_MATERIALS | FLAG_LAYOUT_PAGES);
-    assert!(index.pages.len() >= 3);
-    assert!((0..index.pages.len() as u32).all(|p| index.page_sources(p).unwrap().is_empty()));
-    assert_eq!(decode_in_file_order(&layout), decode_in_file_order(&compact));
-    let read = |bytes: &[u8]| MresFile::parse(bytes.to_vec()).unwrap().to_dag().unwrap();
-    assert_eq!(write_mres(&read(&layout), 1).unwrap(), compact);
-    assert_eq!(write_mres_with(&read(&compact), 1, PageCoding::Layout).unwrap(), layout);
     // A layout page takes no sources.
     let r = index.page_range(1).unwrap();
     let page = &layout[r.start as usize..r.end as usize];

@@ -487,14 +487,12 @@ fn repack_cmd(a: RepackArgs) -> Result<ExitCode> {
     use mres_format::PageCoding;
     let out = Output::create(&a.output)?;
     let f = open(&a.file)?;
-    let dag = f.to_dag().with_context(|| format!("{}", a.file.display()))?;
     let coding = match a.pages {
         PagesArg::Compact => PageCoding::FarCopies,
         PagesArg::Independent => PageCoding::Independent,
         PagesArg::Layout => PageCoding::Layout,
     };
-    let bytes =
-        mres_format::write_mres_with(&dag, a.zstd_level, coding).with_context(|| format!("{}", a.file.display()))?;
+    let bytes = mres_format::rewrite(&f, a.zstd_level, coding).with_context(|| format!("{}", a.file.display()))?;
     std::fs::write(out.tmp.path(), &bytes).with_context(|| format!("{}", a.output.display()))?;
     out.finish()?;
     eprintln!(
