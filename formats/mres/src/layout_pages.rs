@@ -66,33 +66,41 @@ pub(crate) fn check(header: &Header, records: &[ClusterInfo], raw: &[u8]) -> Res
     Ok(())
 }
 
-/// One cluster header against its record and the file's flags.
+/// One cluster header against its record and the file's flags: [`header_limits`], plus what
+/// only a canonical layout promises (no normal fields without normals, reserved bytes zero).
 fn check_header(
     header: &Header,
     record: &ClusterInfo,
     head: &ClusterHeader,
     bytes: &[u8; CLUSTER_HEADER_SIZE],
 ) -> Result<ClusterHeader, String> {
-    if head.vertex_count != record.vertex_count || head.triangle_count != record.triangle_count {
-        return Err("counts differ from the hierarchy".into());
-    }
-    if head.position_bits.iter().any(|&b| b > 32) {
-        return Err("position bit width over 32".into());
-    }
-    let normals = header.flags & FLAG_NORMALS != 0;
-    if normals && head.normal_bits.iter().any(|&b| b as u32 > header.normal_bits) {
-        return Err("normal bit width over the header's normal_bits".into());
-    }
-    if !normals && (head.normal_bits != [0; 2] || head.normal_min != [0; 2]) {
+    header_limits(header, record, head)?;
+    if header.flags & FLAG_NORMALS == 0 && (head.normal_bits != [0; 2] || head.normal_min != [0; 2]) {
         return Err("normal fields set in a file without normals".into());
-    }
-    if head.edge_flags & !ClusterHeader::OPEN_EDGES != 0 {
-        return Err("unknown edge_flags bits".into());
     }
     if bytes[ClusterHeader::RESERVED_2..] != [0, 0] {
         return Err("reserved bytes are not zero".into());
     }
     Ok(*head)
+}
+
+/// The limits every reader checks of a cluster header (FORMAT.md §5.1, §7), whatever the page
+/// encoding: counts equal to the cluster record's, bit widths within their limits, no unknown
+/// `edge_flags` bit.
+pub(crate) fn header_limits(header: &Header, record: &ClusterInfo, head: &ClusterHeader) -> Result<(), &'static str> {
+    if head.vertex_count != record.vertex_count || head.triangle_count != record.triangle_count {
+        return Err("counts differ from the hierarchy");
+    }
+    if head.position_bits.iter().any(|&b| b > 32) {
+        return Err("position bit width over 32");
+    }
+    if header.flags & FLAG_NORMALS != 0 && head.normal_bits.iter().any(|&b| b as u32 > header.normal_bits) {
+        return Err("normal bit width over the header's normal_bits");
+    }
+    if head.edge_flags & !ClusterHeader::OPEN_EDGES != 0 {
+        return Err("unknown edge_flags bits");
+    }
+    Ok(())
 }
 
 /// Walks the blocks in §5's order (every cluster's positions, then normals, UVs, indices with

@@ -268,19 +268,7 @@ fn cluster_header(h: &Header, raw: &[u8], info: &ClusterInfo, index: u32) -> Res
     let bytes = section(raw, info.page_offset as u64, CLUSTER_HEADER_SIZE as u64, &format!("cluster {index} header"))?;
     let bytes = bytes.first_chunk::<CLUSTER_HEADER_SIZE>().ok_or_else(|| corrupt(format!("cluster {index} header")))?;
     let head = ClusterHeader::decode(bytes);
-    let bad = |what: &str| corrupt(format!("cluster {index}: {what}"));
-    if head.vertex_count != info.vertex_count || head.triangle_count != info.triangle_count {
-        return Err(bad("counts differ from the hierarchy"));
-    }
-    if head.position_bits.iter().any(|&b| b > 32) {
-        return Err(bad("position bit width over 32"));
-    }
-    if h.flags & FLAG_NORMALS != 0 && head.normal_bits.iter().any(|&b| b as u32 > h.normal_bits) {
-        return Err(bad("normal bit width over the header's normal_bits"));
-    }
-    if head.edge_flags & !ClusterHeader::OPEN_EDGES != 0 {
-        return Err(bad("unknown edge_flags bits"));
-    }
+    layout_pages::header_limits(h, info, &head).map_err(|what| corrupt(format!("cluster {index}: {what}")))?;
     Ok(head)
 }
 

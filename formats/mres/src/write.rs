@@ -137,18 +137,24 @@ pub fn rewrite(file: &MresFile, level: i32, coding: PageCoding) -> Result<Vec<u8
         for (i, record) in records.iter().enumerate() {
             let head = layout.get(i * CLUSTER_HEADER_SIZE..).and_then(|h| h.first_chunk()).ok_or_else(missing)?;
             let head = ClusterHeader::decode(head);
-            let mut blocks: Blocks = Default::default();
-            for (slot, block) in blocks.iter_mut().enumerate() {
-                let at = head.block_offsets[slot] as usize;
-                if at != 0 {
-                    let bytes = layout.get(at..at + layout_pages::block_len(slot, &head)).ok_or_else(missing)?;
-                    *block = Some(bytes.to_vec());
-                }
-            }
+            let blocks = stored_blocks(&layout, &head).ok_or_else(missing)?;
             clusters.push(EncodedCluster::from_blocks(record.group, record.own_group, head, blocks));
         }
     }
     write_encoded_with(&file.header, &file.groups, clusters, level, coding)
+}
+
+/// The blocks of the cluster with header `head` as page layout `raw` stores them (each with
+/// its padding), or `None` if one lies outside `raw`.
+fn stored_blocks(raw: &[u8], head: &ClusterHeader) -> Option<Blocks> {
+    let mut blocks: Blocks = Default::default();
+    for (slot, block) in blocks.iter_mut().enumerate() {
+        let at = head.block_offsets[slot] as usize;
+        if at != 0 {
+            *block = Some(raw.get(at..at + layout_pages::block_len(slot, head))?.to_vec());
+        }
+    }
+    Some(blocks)
 }
 
 /// The header record of a file with these counts and section sizes; its checksum is left zero.
@@ -540,14 +546,7 @@ pub(crate) fn relaid(raw: &[u8], headers: &[ClusterHeader], flags: u32, normal_b
     let clusters: Vec<EncodedCluster> = headers
         .iter()
         .map(|h| {
-            let mut blocks: Blocks = Default::default();
-            for (slot, block) in blocks.iter_mut().enumerate() {
-                let at = h.block_offsets[slot] as usize;
-                if at != 0 {
-                    *block = Some(raw.get(at..at + layout_pages::block_len(slot, h))?.to_vec());
-                }
-            }
-            let q = EncodedCluster::from_blocks(0, NO_GROUP, *h, blocks).quantized(flags);
+            let q = EncodedCluster::from_blocks(0, NO_GROUP, *h, stored_blocks(raw, h)?).quantized(flags);
             let v = q.positions.len();
             let in_order = first_use_order(&q.indices, v).iter().enumerate().all(|(i, &o)| i == o as usize);
             let canonical =

@@ -148,17 +148,22 @@ fn huge_claimed_page_size_is_rejected() {
     assert!(matches!(err, MresError::Corrupt(ref m) if m.contains("decompressed")), "{err}");
 }
 
+/// A xorshift32 stream from `state` (nonzero): the tests' reproducible pseudo-random bits.
+fn xorshift(mut state: u32) -> impl FnMut() -> u32 {
+    move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state
+    }
+}
+
 /// A DAG spread over several pages: `n` level-0 groups of one cluster each, every one
 /// simplified into a cluster of the single root group. Positions are spread over 20 bits per
 /// axis so that clusters are large and pages fill up.
 fn multi_page_dag(n: u32) -> Dag {
-    let mut state = 0x2545_f491u32;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        (state >> 12) as i32
-    };
+    let mut bits = xorshift(0x2545_f491);
+    let mut next = move || (bits() >> 12) as i32;
     let mut cluster = |group: u32, own_group: u32| DagCluster {
         group,
         own_group,
@@ -503,13 +508,8 @@ fn far_dag_with_normals(n: u32) -> Dag {
     dag.header.flags |= mres_format::FLAG_NORMALS | mres_format::FLAG_UVS;
     dag.header.normal_bits = 10;
     dag.header.uv = UvQuant { min: [0.0; 2], extent: [1.0; 2] };
-    let mut state = 0x9e37_79b9u32;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        (state >> 8) as f32 / (1u32 << 24) as f32
-    };
+    let mut bits = xorshift(0x9e37_79b9);
+    let mut next = move || (bits() >> 8) as f32 / (1u32 << 24) as f32;
     for c in &mut dag.clusters {
         c.normals = (0..c.positions.len())
             .map(|_| {
