@@ -1147,6 +1147,10 @@ class Checker:
         out again to the same bytes (the canonical layout); None after a
         violation."""
         r = self.r
+        bound = rs + rs // 255 + 16  # LZ4_compressBound (section 4.4)
+        if len(comp) > bound:
+            r.violation("page_decompress", f"page {p}: an LZ4 block of {len(comp)} bytes for {rs} bytes of layout (at most {bound})")
+            return None
         try:
             raw = lz4.block.decompress(comp, uncompressed_size=rs)
         except lz4.block.LZ4BlockError as exc:

@@ -1136,17 +1136,20 @@ def test_bad_layout_page_is_rejected(baked, layout, which):
     assert_layout_caught(proc, "page_layout", message.format(vc=vc))
 
 
-@pytest.mark.parametrize("which", ["truncated", "short"])
+@pytest.mark.parametrize("which", ["truncated", "short", "long"])
 def test_bad_lz4_block_is_rejected(layout, which):
-    """A truncated LZ4 block, and one that decompresses to raw_size - 4
-    bytes (§4.4: exactly raw_size)."""
+    """A truncated LZ4 block, one that decompresses to raw_size - 4 bytes
+    (§4.4: exactly raw_size), and one longer than LZ4_compressBound(raw_size)."""
     def mutate(data):
         rec = page(data, 0)
         comp = bytes(data[rec["offset"]:rec["offset"] + rec["csize"]])
-        store_page(data, 0, comp[:-2] if which == "truncated" else
-                   lz4.block.compress(bytes(layout_raw(data, 0)[:-4]), store_size=False))
+        rs = rec["rsize"]
+        store_page(data, 0, {"truncated": comp[:-2],
+                             "short": lz4.block.compress(bytes(layout_raw(data, 0)[:-4]), store_size=False),
+                             "long": comp + bytes(rs + rs // 255 + 17 - len(comp))}[which])
     proc = run_on(layout, "sphere", f"lz4-{which}", mutate)
-    assert_layout_caught(proc, "page_decompress", "LZ4 error" if which == "truncated" else "its LZ4 block decompresses to")
+    message = {"truncated": "LZ4 error", "short": "its LZ4 block decompresses to", "long": "at most"}[which]
+    assert_layout_caught(proc, "page_decompress", message)
 
 
 def rotated_triangle(c):

@@ -54,7 +54,8 @@
 
 /**
  * Header flag: every page is stored as its GPU layout, one LZ4 block (docs/FORMAT.md §4.4):
- * pages decode at memory speed and have no sources (each decodes alone).
+ * `mres_page_layout` gives their layouts at memory speed, and they have no sources (each
+ * decodes alone).
  */
 #define MRES_FLAG_LAYOUT_PAGES 8
 
@@ -528,6 +529,41 @@ enum MresStatus mres_page_decode(const struct MresIndex *index,
                                  const struct MresPage *const *sources,
                                  size_t source_count,
                                  struct MresPage **out);
+
+/**
+ * Checks `len` bytes at `bytes` (the caller's fetch of `mres_page_range(index, page)`) as
+ * `mres_page_decode` does and writes the page's GPU layout (docs/FORMAT.md §5, the bytes
+ * `mres_page_bytes` gives) to `out`, without decoding its clusters into arrays: the path for
+ * a streamer that uploads pages. Layout pages (`MRES_FLAG_LAYOUT_PAGES`) take it at over a
+ * gigabyte of layout per second per core; `mres_page_decode` also unpacks every cluster.
+ *
+ * The layout is `raw_size` bytes (`mres_index_page`); `*count` receives that. With `out` null
+ * and `cap` 0 nothing is decoded (a size query); a `cap` below it gives
+ * `MRES_ERR_BUFFER_TOO_SMALL`, before anything is decoded.
+ *
+ * `sources` and `source_lens` are arrays of `source_count` entries: the GPU layouts of the
+ * page's sources (`mres_page_sources`, in that order; each what this function or
+ * `mres_page_bytes` gave for that page) and their lengths. Null with `source_count` 0
+ * passes none: enough for a page that copies nothing from its sources, and for every page of
+ * a file with layout pages. Errors as for `mres_page_decode`. The library keeps no pointer
+ * into `bytes`, `sources` or `out`.
+ *
+ * # Safety
+ * `index` must be a live index; `bytes` must point to `len` readable bytes; `sources` and
+ * `source_lens` to `source_count` entries each (or be null with `source_count` 0), each
+ * source to its length in readable bytes; `out` to `cap` writable bytes (or be null with
+ * `cap` 0); `count` must be valid for a write.
+ */
+enum MresStatus mres_page_layout(const struct MresIndex *index,
+                                 uint32_t page,
+                                 const uint8_t *bytes,
+                                 size_t len,
+                                 const uint8_t *const *sources,
+                                 const size_t *source_lens,
+                                 size_t source_count,
+                                 uint8_t *out,
+                                 size_t cap,
+                                 size_t *count);
 
 /**
  * Frees a page. Null is allowed (nothing happens). Pointers from `mres_page_bytes` dangle

@@ -129,7 +129,8 @@ pub const MRES_FLAG_UVS: u32 = 2;
 /// Header flag: clusters carry a material per triangle.
 pub const MRES_FLAG_MATERIALS: u32 = 4;
 /// Header flag: every page is stored as its GPU layout, one LZ4 block (docs/FORMAT.md §4.4):
-/// pages decode at memory speed and have no sources (each decodes alone).
+/// `mres_page_layout` gives their layouts at memory speed, and they have no sources (each
+/// decodes alone).
 pub const MRES_FLAG_LAYOUT_PAGES: u32 = 8;
 /// `MresCluster::own_group` of a level-0 cluster.
 pub const MRES_NO_GROUP: u32 = 0xFFFF_FFFF;

@@ -76,6 +76,66 @@ pub unsafe extern "C" fn mres_page_decode(
     })
 }
 
+/// Checks `len` bytes at `bytes` (the caller's fetch of `mres_page_range(index, page)`) as
+/// `mres_page_decode` does and writes the page's GPU layout (docs/FORMAT.md §5, the bytes
+/// `mres_page_bytes` gives) to `out`, without decoding its clusters into arrays: the path for
+/// a streamer that uploads pages. Layout pages (`MRES_FLAG_LAYOUT_PAGES`) take it at over a
+/// gigabyte of layout per second per core; `mres_page_decode` also unpacks every cluster.
+///
+/// The layout is `raw_size` bytes (`mres_index_page`); `*count` receives that. With `out` null
+/// and `cap` 0 nothing is decoded (a size query); a `cap` below it gives
+/// `MRES_ERR_BUFFER_TOO_SMALL`, before anything is decoded.
+///
+/// `sources` and `source_lens` are arrays of `source_count` entries: the GPU layouts of the
+/// page's sources (`mres_page_sources`, in that order; each what this function or
+/// `mres_page_bytes` gave for that page) and their lengths. Null with `source_count` 0
+/// passes none: enough for a page that copies nothing from its sources, and for every page of
+/// a file with layout pages. Errors as for `mres_page_decode`. The library keeps no pointer
+/// into `bytes`, `sources` or `out`.
+///
+/// # Safety
+/// `index` must be a live index; `bytes` must point to `len` readable bytes; `sources` and
+/// `source_lens` to `source_count` entries each (or be null with `source_count` 0), each
+/// source to its length in readable bytes; `out` to `cap` writable bytes (or be null with
+/// `cap` 0); `count` must be valid for a write.
+#[no_mangle]
+#[allow(clippy::too_many_arguments)] // A C signature: the buffers travel as pointer and length.
+pub unsafe extern "C" fn mres_page_layout(
+    index: *const MresIndex,
+    page: u32,
+    bytes: *const u8,
+    len: usize,
+    sources: *const *const u8,
+    source_lens: *const usize,
+    source_count: usize,
+    out: *mut u8,
+    cap: usize,
+    count: *mut usize,
+) -> MresStatus {
+    call("mres_page_layout", || {
+        // SAFETY: the caller's contract, as documented.
+        let (index, compressed) = unsafe { (&get(index, "index")?.inner, crate::ffi::bytes(bytes, len, "bytes")?) };
+        let raw_size = crate::index::item(&index.pages, page, "page")?.raw_size as usize;
+        // Only the size, before anything is decoded.
+        // SAFETY: the caller's contract, as documented.
+        unsafe { put(count, "count", raw_size)? };
+        if out.is_null() && cap == 0 {
+            return Ok(());
+        }
+        if cap < raw_size {
+            return Err(Failure::new(
+                MresStatus::MRES_ERR_BUFFER_TOO_SMALL,
+                format!("the buffer holds {cap} bytes; page {page}'s layout is {raw_size}"),
+            ));
+        }
+        // SAFETY: the caller's contract, as documented.
+        let layouts = unsafe { raw_sources(sources, source_lens, source_count)? };
+        let layout = index.page_layout(page, compressed, &layouts)?;
+        // SAFETY: as above.
+        unsafe { copy_out(&layout, out, cap, count) }
+    })
+}
+
 /// The GPU layouts of the `count` pages at `sources`, each checked to be the page's source of
 /// its place (so that a wrong page is named, not only found too short).
 ///
@@ -109,6 +169,33 @@ unsafe fn source_layouts<'a>(
         out.push(source.page.bytes.as_slice());
     }
     Ok(out)
+}
+
+/// The `count` source layouts at `sources`, of the lengths at `lens`.
+///
+/// # Safety
+/// As for `mres_page_layout`'s `sources` and `source_lens`.
+unsafe fn raw_sources<'a>(
+    sources: *const *const u8,
+    lens: *const usize,
+    count: usize,
+) -> Result<Vec<&'a [u8]>, Failure> {
+    if count == 0 {
+        return Ok(Vec::new());
+    }
+    if sources.is_null() || lens.is_null() {
+        return Err(Failure::arg("sources or source_lens is null"));
+    }
+    // SAFETY: both point to `count` entries (the caller's contract).
+    let (pointers, lens) =
+        unsafe { (std::slice::from_raw_parts(sources, count), std::slice::from_raw_parts(lens, count)) };
+    // SAFETY: each points to its length in readable bytes (the caller's contract).
+    pointers
+        .iter()
+        .zip(lens)
+        .enumerate()
+        .map(|(i, (&p, &n))| unsafe { crate::ffi::bytes(p, n, &format!("source {i}")) })
+        .collect()
 }
 
 /// Frees a page. Null is allowed (nothing happens). Pointers from `mres_page_bytes` dangle

@@ -448,3 +448,81 @@ fn one_index_serves_many_threads() {
     // SAFETY: every thread is done with it.
     unsafe { mres_index_free(index as *mut MresIndex) };
 }
+
+/// Page `p`'s layout through `mres_page_layout`, given `sources` (layouts) as its sources.
+fn layout_with(
+    index: *const MresIndex,
+    p: u32,
+    bytes: &[u8],
+    sources: &[&[u8]],
+    cap: usize,
+) -> Result<Vec<u8>, MresStatus> {
+    let pointers: Vec<*const u8> = sources.iter().map(|s| s.as_ptr()).collect();
+    let lens: Vec<usize> = sources.iter().map(|s| s.len()).collect();
+    let mut out = vec![0u8; cap];
+    let mut count = usize::MAX;
+    // SAFETY: valid pointers and lengths.
+    let status = unsafe {
+        let (data, n) = (bytes.as_ptr(), bytes.len());
+        mres_page_layout(
+            index,
+            p,
+            data,
+            n,
+            pointers.as_ptr(),
+            lens.as_ptr(),
+            sources.len(),
+            out.as_mut_ptr(),
+            cap,
+            &mut count,
+        )
+    };
+    match status {
+        MresStatus::MRES_OK => {
+            out.truncate(count);
+            Ok(out)
+        }
+        status => Err(status),
+    }
+}
+
+/// `mres_page_layout` gives each page's layout as the Rust reader does, from the fetched bytes
+/// and its sources' layouts; a size query decodes nothing, and a short buffer, wrong sources
+/// and damaged bytes give their statuses.
+#[test]
+fn page_layouts_stream_without_handles() {
+    let file = common::file();
+    let rust = RustIndex::parse(&file).unwrap();
+    let index = open(&file).unwrap();
+    let mut layouts: Vec<Vec<u8>> = Vec::new();
+    let mut checked_sources = 0;
+    for p in 0..rust.pages.len() as u32 {
+        let bytes = page_bytes(&file, &rust, p);
+        let sources: Vec<&[u8]> = sources_of(index, p).iter().map(|&s| layouts[s as usize].as_slice()).collect();
+        let raw_size = rust.pages[p as usize].raw_size as usize;
+        let mut count = 0;
+        // SAFETY: a size query: null output with capacity 0, and garbage page bytes (not read).
+        assert_eq!(
+            unsafe { mres_page_layout(index, p, null(), 0, null(), null(), 0, null_mut(), 0, &mut count) },
+            MresStatus::MRES_OK
+        );
+        assert_eq!(count, raw_size);
+        assert_eq!(layout_with(index, p, &bytes, &sources, raw_size - 1), Err(MresStatus::MRES_ERR_BUFFER_TOO_SMALL));
+        let layout = layout_with(index, p, &bytes, &sources, raw_size + 7).unwrap();
+        assert_eq!(layout, rust.page_layout(p, &bytes, &sources).unwrap());
+        if !sources.is_empty() {
+            let mut more = sources.clone();
+            more.push(sources[0]);
+            assert_eq!(layout_with(index, p, &bytes, &more, raw_size), Err(MresStatus::MRES_ERR_ARG));
+            checked_sources += 1;
+        }
+        let mut flipped = bytes.clone();
+        flipped[bytes.len() / 2] ^= 0x10;
+        assert_eq!(layout_with(index, p, &flipped, &sources, raw_size), Err(MresStatus::MRES_ERR_CHECKSUM));
+        assert!(last_error().starts_with("mres_page_layout: checksum mismatch"), "{}", last_error());
+        layouts.push(layout);
+    }
+    assert!(checked_sources > 0, "no page of the test file has sources");
+    // SAFETY: from mres_index_open.
+    unsafe { mres_index_free(index) };
+}

@@ -20,15 +20,29 @@ pub(crate) fn compress(raw: &[u8]) -> std::io::Result<Vec<u8>> {
     lz4::block::compress(raw, Some(lz4::block::CompressionMode::HIGHCOMPRESSION(HC_LEVEL)), false)
 }
 
+/// The longest LZ4 block a page of `raw_size` bytes may have (FORMAT.md §4.4): liblz4's
+/// `LZ4_compressBound`, the most its compressor ever writes.
+pub(crate) fn compress_bound(raw_size: usize) -> usize {
+    raw_size + raw_size / 255 + 16
+}
+
 /// Page `p`'s layout from its LZ4 block: exactly `raw_size` bytes, checked by [`check`].
 pub(crate) fn decompress(
     header: &Header,
     records: &[ClusterInfo],
+    first_cluster: u32,
     p: u32,
     compressed: &[u8],
     raw_size: usize,
 ) -> Result<Vec<u8>, MresError> {
     let problem = |problem: String| MresError::Decompress { page: p, problem };
+    if compressed.len() > compress_bound(raw_size) {
+        return Err(problem(format!(
+            "an LZ4 block of {} bytes for {raw_size} bytes of layout (at most {} allowed)",
+            compressed.len(),
+            compress_bound(raw_size)
+        )));
+    }
     let mut raw = vec![0u8; raw_size];
     // liblz4's safe decoder never writes past `raw`; fewer bytes than `raw_size` is an error too.
     let len = lz4::block::decompress_to_buffer(compressed, Some(raw_size as i32), &mut raw)
@@ -36,7 +50,7 @@ pub(crate) fn decompress(
     if len != raw_size {
         return Err(problem(format!("LZ4 block decompresses to {len} bytes, raw_size says {raw_size}")));
     }
-    check(header, records, &raw).map_err(|e| corrupt(format!("page {p}: {e}")))?;
+    check(header, records, first_cluster, &raw).map_err(|e| corrupt(format!("page {p}: {e}")))?;
     Ok(raw)
 }
 
@@ -45,9 +59,9 @@ pub(crate) fn decompress(
 /// them out (so they lie inside the page and never overlap), local indices are in range, and
 /// padding and unused bits are zero. What needs every value unpacked (minima and widths
 /// exact, octahedral values in range, the vertex order) is left to [`crate::write::relaid`].
-pub(crate) fn check(header: &Header, records: &[ClusterInfo], raw: &[u8]) -> Result<(), String> {
-    let heads = CLUSTER_HEADER_SIZE * records.len();
-    if raw.len() < heads {
+/// Errors name clusters by their file index (`records` are clusters `first_cluster..`).
+pub(crate) fn check(header: &Header, records: &[ClusterInfo], first_cluster: u32, raw: &[u8]) -> Result<(), String> {
+    if records.len() > raw.len() / CLUSTER_HEADER_SIZE {
         return Err(format!("{} cluster headers do not fit in {} bytes", records.len(), raw.len()));
     }
     let headers: Vec<ClusterHeader> = records
@@ -56,10 +70,12 @@ pub(crate) fn check(header: &Header, records: &[ClusterInfo], raw: &[u8]) -> Res
         .map(|(i, record)| {
             let at = i * CLUSTER_HEADER_SIZE;
             let bytes = raw[at..at + CLUSTER_HEADER_SIZE].first_chunk().ok_or("header")?;
-            check_header(header, record, &ClusterHeader::decode(bytes), bytes).map_err(|e| format!("cluster {i}: {e}"))
+            check_header(header, record, &ClusterHeader::decode(bytes), bytes)
+                .map_err(|e| format!("cluster {}: {e}", first_cluster as usize + i))
         })
         .collect::<Result<_, String>>()?;
-    let end = check_blocks(header.flags, &headers, raw)?;
+    let end = check_blocks(header.flags, &headers, raw)
+        .map_err(|(i, e)| format!("cluster {}: {e}", first_cluster as usize + i))?;
     if end != raw.len() {
         return Err(format!("its blocks end at byte {end}, its layout has {} bytes", raw.len()));
     }
@@ -105,8 +121,8 @@ pub(crate) fn header_limits(header: &Header, record: &ClusterInfo, head: &Cluste
 
 /// Walks the blocks in §5's order (every cluster's positions, then normals, UVs, indices with
 /// their open-edge blocks, materials), checking each header's offsets and each block's
-/// contents; returns where the last block ends.
-fn check_blocks(flags: u32, headers: &[ClusterHeader], raw: &[u8]) -> Result<usize, String> {
+/// contents; returns where the last block ends, or the page's cluster at fault and what is wrong.
+fn check_blocks(flags: u32, headers: &[ClusterHeader], raw: &[u8]) -> Result<usize, (usize, String)> {
     let mut at = CLUSTER_HEADER_SIZE * headers.len();
     for slot in 0..5 {
         let present = match slot {
@@ -119,13 +135,12 @@ fn check_blocks(flags: u32, headers: &[ClusterHeader], raw: &[u8]) -> Result<usi
             let offset = head.block_offsets[slot] as usize;
             let expected = if present { at } else { 0 };
             if offset != expected {
-                return Err(format!("cluster {i}: block {slot} at byte {offset}, the layout puts it at {expected}"));
+                return Err((i, format!("block {slot} at byte {offset}, the layout puts it at {expected}")));
             }
             if present {
                 let len = block_len(slot, head);
-                let block =
-                    raw.get(at..at + len).ok_or_else(|| format!("cluster {i}: block {slot} ends past the page"))?;
-                check_block(slot, head, block).map_err(|e| format!("cluster {i}: {e}"))?;
+                let block = raw.get(at..at + len).ok_or_else(|| (i, format!("block {slot} ends past the page")))?;
+                check_block(slot, head, block).map_err(|e| (i, e))?;
                 at += len;
             }
         }

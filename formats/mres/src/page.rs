@@ -83,7 +83,7 @@ pub(crate) fn decompress_page(
         if !layouts.is_empty() {
             return Err(MresError::SourceCount { page: p, given: layouts.len(), expected: 0 });
         }
-        return layout_pages::decompress(header, records, p, compressed, info.raw_size as usize);
+        return layout_pages::decompress(header, records, info.first_cluster, p, compressed, info.raw_size as usize);
     }
     let sources = source_pages(header.flags, clusters, pages, p, layouts)?;
     // The counts bound the encoded size before anything is allocated; the capacity bounds the
@@ -188,14 +188,32 @@ pub(crate) fn page_from_layout(
         decoded.push(cluster);
     }
     check_open_blocks(&headers, p)?;
-    if header.flags & FLAG_LAYOUT_PAGES != 0
-        && write::relaid(&bytes, &headers, header.flags, header.normal_bits).as_ref() != Some(&bytes)
-    {
-        return Err(corrupt(format!(
-            "page {p}: its layout is not the one the writer lays its values out to (FORMAT.md §4.4)"
-        )));
+    if header.flags & FLAG_LAYOUT_PAGES != 0 {
+        let not_canonical = |i: usize, what: &str| {
+            let c = info.first_cluster as usize + i;
+            corrupt(format!(
+                "page {p}: cluster {c}: {what}: not the layout the writer lays its values out to (FORMAT.md §4.4)"
+            ))
+        };
+        let again = write::relaid(&bytes, &headers, header.flags, header.normal_bits)
+            .map_err(|(i, what)| not_canonical(i, what))?;
+        if let Some(at) = again.iter().zip(&bytes).position(|(a, b)| a != b) {
+            return Err(not_canonical(
+                cluster_at(&headers, at),
+                &format!("byte {at} differs (minima or bit widths not exact)"),
+            ));
+        }
     }
     Ok(Page { index: p, first_cluster: info.first_cluster, bytes, headers, clusters: decoded })
+}
+
+/// The page's cluster whose header or block holds byte `at` of a canonical layout.
+fn cluster_at(headers: &[ClusterHeader], at: usize) -> usize {
+    if at < CLUSTER_HEADER_SIZE * headers.len() {
+        return at / CLUSTER_HEADER_SIZE;
+    }
+    let starts = headers.iter().enumerate().flat_map(|(i, h)| h.block_offsets.iter().map(move |&o| (o as usize, i)));
+    starts.filter(|&(o, _)| o != 0 && o <= at).max().map_or(0, |(_, i)| i)
 }
 
 /// The byte range of each data block of the cluster with header `c` (FORMAT.md §5), and

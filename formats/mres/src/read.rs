@@ -87,7 +87,7 @@ impl MresIndex {
         let pages = decode_page_table(table, &r)?;
         check_group_tiling(&groups, clusters.len())?;
         let file_size = check_page_tiling(&pages, resident_len)?;
-        check_group_pages(&groups, &pages)?;
+        check_group_pages(&groups, &clusters, &pages)?;
         Ok(MresIndex { header: r.header(), groups, clusters, pages, file_size })
     }
 
@@ -478,16 +478,50 @@ fn check_page_tiling(pages: &[PageInfo], pages_start: u64) -> Result<u64, MresEr
     Ok(next_offset)
 }
 
-/// Each group's clusters lie in the page it names.
-fn check_group_pages(groups: &[Group], pages: &[PageInfo]) -> Result<(), MresError> {
-    for (g, group) in groups.iter().enumerate() {
-        let page = page_info(pages, group.page)?;
-        let inside = group.first_cluster >= page.first_cluster
-            && group.first_cluster as u64 + group.cluster_count as u64
-                <= page.first_cluster as u64 + page.cluster_count as u64;
-        if !inside {
-            return Err(corrupt(format!("group {g}: clusters not within page {}", group.page)));
+/// Pages hold whole, consecutive groups and tile the groups and the clusters in order, every
+/// group names the page that holds it, and each cluster's header sits at `48·i` of its page
+/// (FORMAT.md §4.1, §5): the streaming reader and renderers follow `page_offset`, and the page
+/// checks find headers at `48·i`.
+fn check_group_pages(groups: &[Group], clusters: &[ClusterInfo], pages: &[PageInfo]) -> Result<(), MresError> {
+    let (mut next_group, mut next_cluster) = (0u64, 0u64);
+    for (p, page) in pages.iter().enumerate() {
+        if page.first_group as u64 != next_group || page.first_cluster as u64 != next_cluster {
+            return Err(corrupt(format!(
+                "page {p}: groups from {} and clusters from {} but the pages before it end at group {next_group}, cluster {next_cluster}",
+                page.first_group, page.first_cluster
+            )));
         }
+        // Ranges were checked against the counts when the records were read.
+        let held = &groups[page.first_group as usize..][..page.group_count as usize];
+        let held_clusters: u64 = held.iter().map(|g| g.cluster_count as u64).sum();
+        if let Some(g) = held.iter().position(|g| g.page as usize != p) {
+            return Err(corrupt(format!(
+                "group {}: in page {p} but names page {}",
+                page.first_group as usize + g,
+                held[g].page
+            )));
+        }
+        if held.first().is_some_and(|g| g.first_cluster != page.first_cluster)
+            || held_clusters != page.cluster_count as u64
+        {
+            return Err(corrupt(format!("page {p}: its clusters are not exactly its groups' members")));
+        }
+        let first = page.first_cluster as usize;
+        for (i, c) in clusters[first..][..page.cluster_count as usize].iter().enumerate() {
+            if c.page_offset as u64 != (i * CLUSTER_HEADER_SIZE) as u64 {
+                return Err(corrupt(format!(
+                    "cluster {}: page_offset {} but it is cluster {i} of page {p} (header at {})",
+                    first + i,
+                    c.page_offset,
+                    i * CLUSTER_HEADER_SIZE
+                )));
+            }
+        }
+        next_group += page.group_count as u64;
+        next_cluster += page.cluster_count as u64;
+    }
+    if next_group != groups.len() as u64 || next_cluster != clusters.len() as u64 {
+        return Err(corrupt("pages do not hold every group and cluster".into()));
     }
     Ok(())
 }

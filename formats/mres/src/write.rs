@@ -120,12 +120,15 @@ pub fn write_encoded_with(
 }
 
 /// `file` written again with its pages stored as `coding` says (what `mres repack` does): the
-/// same groups, clusters and GPU layouts, byte for byte, in other page bytes. Each cluster is
-/// taken from its page's layout as stored (every page read and checked first: a layout page
-/// must be canonical, FORMAT.md §4.4), never through decoded floats, whose normals and UVs
-/// would quantize back only nearly. Rewriting a file with its own coding and zstd level
-/// gives its bytes.
+/// same groups, clusters and values in other page bytes. Each cluster is taken from its page's
+/// layout as stored (every page read and checked first), never through decoded floats, whose
+/// normals and UVs would quantize back only nearly, and laid out in the writer's canonical
+/// form (vertices in first-use order, triangles as the index codec gives them back; FORMAT.md
+/// §4.4 requires it of layout pages). Our writer's files are canonical already, so rewriting
+/// one with its own coding and zstd level gives its bytes; a compact file from another writer
+/// may number a cluster's vertices otherwise (§4.3 allows it) and gets them renumbered.
 pub fn rewrite(file: &MresFile, level: i32, coding: PageCoding) -> Result<Vec<u8>, WriteError> {
+    let most_normal = (1u64 << file.header.normal_bits.min(32)) - 1;
     let mut clusters = Vec::with_capacity(file.clusters.len());
     for (p, info) in file.pages.iter().enumerate() {
         let layout = file.decode_page(p as u32)?.bytes;
@@ -137,7 +140,18 @@ pub fn rewrite(file: &MresFile, level: i32, coding: PageCoding) -> Result<Vec<u8
         for (i, record) in records.iter().enumerate() {
             let head = layout.get(i * CLUSTER_HEADER_SIZE..).and_then(|h| h.first_chunk()).ok_or_else(missing)?;
             let head = ClusterHeader::decode(head);
-            let blocks = stored_blocks(&layout, &head).ok_or_else(missing)?;
+            let stored =
+                EncodedCluster::from_blocks(0, NO_GROUP, head, stored_blocks(&layout, &head).ok_or_else(missing)?);
+            let bad =
+                |problem: &str| WriteError::BadCluster { cluster: first + i, problem: format!("page {p}: {problem}") };
+            let q = stored.quantized(file.header.flags);
+            if q.normals.iter().flatten().any(|&n| n as u64 > most_normal) {
+                return Err(bad("an octahedral normal value is over 2^normal_bits - 1"));
+            }
+            let q = canonical(q).filter(is_canonical).ok_or_else(|| {
+                bad("meshoptimizer's index codec does not give its triangles back in a canonical form")
+            })?;
+            let (head, blocks) = gpu_blocks(&q, file.header.flags);
             clusters.push(EncodedCluster::from_blocks(record.group, record.own_group, head, blocks));
         }
     }
@@ -469,7 +483,7 @@ fn compress_page(
 /// [`compress_page`]'s: decompressed and checked as a reader does, it must give `raw` back.
 fn layout_page(raw: Vec<u8>, clusters: &[&EncodedCluster], header: &Header) -> Result<Vec<u8>, WriteError> {
     let block = layout_pages::compress(&raw)?;
-    let back = layout_pages::decompress(header, &page_records(clusters), 0, &block, raw.len());
+    let back = layout_pages::decompress(header, &page_records(clusters), 0, 0, &block, raw.len());
     if back.ok() != Some(raw) {
         return Err(WriteError::BadDag("the page's layout does not read back (a writer bug)".into()));
     }
@@ -536,27 +550,39 @@ pub(crate) fn gpu_page(clusters: &[Quantized], flags: u32) -> Vec<u8> {
 
 /// A page's layout `raw` laid out again from the values it holds, as the writer lays out a
 /// page of them (FORMAT.md §4.4: a layout page must be exactly that); `headers` are its
-/// cluster headers, whose blocks [`layout_pages::check`] has found in place. `None` where the
-/// values are not what the writer stores: vertices not in first-use order, corners not as
-/// the index codec gives them back, octahedral values over `2^normal_bits − 1`.
-pub(crate) fn relaid(raw: &[u8], headers: &[ClusterHeader], flags: u32, normal_bits: u32) -> Option<Vec<u8>> {
+/// cluster headers, whose blocks [`layout_pages::check`] has found in place. Where the values
+/// are not what the writer stores, the page's cluster at fault and what is wrong: vertices
+/// not in first-use order, corners not as the index codec gives them back, octahedral values
+/// over `2^normal_bits − 1`.
+pub(crate) fn relaid(
+    raw: &[u8],
+    headers: &[ClusterHeader],
+    flags: u32,
+    normal_bits: u32,
+) -> Result<Vec<u8>, (usize, &'static str)> {
     // `normal_bits` is 4..=16 in a file with normals and unchecked in one without (which has
     // no octahedral values to bound), so the shift is done wide.
     let most = (1u64 << normal_bits.min(32)) - 1;
     let clusters: Vec<EncodedCluster> = headers
         .iter()
-        .map(|h| {
-            let q = EncodedCluster::from_blocks(0, NO_GROUP, *h, stored_blocks(raw, h)?).quantized(flags);
-            let v = q.positions.len();
-            let in_order = first_use_order(&q.indices, v).iter().enumerate().all(|(i, &o)| i == o as usize);
-            let canonical =
-                codec::canonical_triangles(&q.indices, &q.marks, v) == Some((q.indices.clone(), q.marks.clone()));
-            let in_range = q.normals.iter().flatten().all(|&n| n as u64 <= most);
+        .enumerate()
+        .map(|(i, h)| {
+            let blocks = stored_blocks(raw, h).ok_or((i, "a block lies outside the page"))?;
+            let q = EncodedCluster::from_blocks(0, NO_GROUP, *h, blocks).quantized(flags);
+            if q.normals.iter().flatten().any(|&n| n as u64 > most) {
+                return Err((i, "an octahedral value is over 2^normal_bits - 1"));
+            }
+            if !is_canonical(&q) {
+                return Err((
+                    i,
+                    "its vertices are not in first-use order or its triangles not as the index codec gives them back",
+                ));
+            }
             let (header, blocks) = gpu_blocks(&q, flags);
-            (in_order && canonical && in_range).then(|| EncodedCluster::from_blocks(0, NO_GROUP, header, blocks))
+            Ok(EncodedCluster::from_blocks(0, NO_GROUP, header, blocks))
         })
-        .collect::<Option<_>>()?;
-    Some(assemble_page(&clusters.iter().collect::<Vec<_>>()).0)
+        .collect::<Result<_, _>>()?;
+    Ok(assemble_page(&clusters.iter().collect::<Vec<_>>()).0)
 }
 
 /// One page's place: its clusters and groups (in the new order) and its decompressed size.
@@ -771,34 +797,59 @@ fn check_cluster(c: &DagCluster, flags: u32, index: usize) -> Result<(), WriteEr
     Ok(())
 }
 
-/// A checked cluster's quantized values, its vertices reordered into first-use order and its
-/// triangles as the index codec gives them back (FORMAT.md §4.3).
+/// A checked cluster's quantized values in the canonical form (FORMAT.md §4.3).
 fn quantize(c: &DagCluster, h: &Header) -> Option<Quantized> {
-    let order = first_use_order(&c.indices, c.positions.len());
-    let mut new_index = vec![0u8; c.positions.len()];
+    let with = |flag: u32| h.flags & flag != 0;
+    canonical(Quantized {
+        positions: c.positions.clone(),
+        normals: if with(FLAG_NORMALS) {
+            c.normals.iter().map(|&n| oct_encode(n, h.normal_bits).map(|v| v as u16)).collect()
+        } else {
+            Vec::new()
+        },
+        uvs: if with(FLAG_UVS) { c.uvs.iter().map(|&uv| h.uv.quantize(uv)).collect() } else { Vec::new() },
+        indices: c.indices.clone(),
+        materials: if with(FLAG_MATERIALS) { c.materials.clone() } else { Vec::new() },
+        marks: if c.open_edges.is_empty() { vec![0; c.indices.len() / 3] } else { c.open_edges.clone() },
+    })
+}
+
+/// `q` in the writer's canonical form: its vertices renumbered in first-use order and its
+/// triangles as meshoptimizer's index codec gives them back (FORMAT.md §4.3), or `None` where
+/// the codec does not give them back. The values stay the same.
+fn canonical(q: Quantized) -> Option<Quantized> {
+    let v = q.positions.len();
+    let order = first_use_order(&q.indices, v);
+    let mut new_index = vec![0u8; v];
     for (new, &old) in order.iter().enumerate() {
         new_index[old as usize] = new as u8;
     }
-    let with = |flag: u32| h.flags & flag != 0;
-    let indices: Vec<u8> = c.indices.iter().map(|&i| new_index[i as usize]).collect();
-    let marks = if c.open_edges.is_empty() { vec![0; c.indices.len() / 3] } else { c.open_edges.clone() };
-    let (indices, marks) = codec::canonical_triangles(&indices, &marks, c.positions.len())?;
+    let indices: Vec<u8> = q.indices.iter().map(|&i| new_index[i as usize]).collect();
+    let (indices, marks) = codec::canonical_triangles(&indices, &q.marks, v)?;
     Some(Quantized {
-        positions: order.iter().map(|&o| c.positions[o as usize]).collect(),
-        normals: if with(FLAG_NORMALS) {
-            order.iter().map(|&o| oct_encode(c.normals[o as usize], h.normal_bits).map(|v| v as u16)).collect()
-        } else {
-            Vec::new()
-        },
-        uvs: if with(FLAG_UVS) {
-            order.iter().map(|&o| h.uv.quantize(c.uvs[o as usize])).collect()
-        } else {
-            Vec::new()
-        },
+        positions: reordered(&q.positions, &order),
+        normals: reordered(&q.normals, &order),
+        uvs: reordered(&q.uvs, &order),
         indices,
-        materials: if with(FLAG_MATERIALS) { c.materials.clone() } else { Vec::new() },
+        materials: q.materials,
         marks,
     })
+}
+
+/// Per-vertex `values` (none where the file has no such attribute) in the vertex `order`.
+fn reordered<T: Copy>(values: &[T], order: &[u8]) -> Vec<T> {
+    if values.is_empty() {
+        return Vec::new();
+    }
+    order.iter().map(|&o| values[o as usize]).collect()
+}
+
+/// Whether `q` is in the canonical form: vertices in first-use order, triangles as the index
+/// codec gives them back.
+fn is_canonical(q: &Quantized) -> bool {
+    let v = q.positions.len();
+    let in_order = first_use_order(&q.indices, v).iter().enumerate().all(|(i, &o)| i == o as usize);
+    in_order && codec::canonical_triangles(&q.indices, &q.marks, v) == Some((q.indices.clone(), q.marks.clone()))
 }
 
 /// The GPU-layout header (block offsets left zero) and blocks of a quantized cluster
@@ -1148,5 +1199,69 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `bytes` (a one-page file) with its page encoded from `clusters` (FORMAT.md §4.3, no
+    /// sources), compressed, and the page record and meta checksum sealed again.
+    fn with_page_of(bytes: &[u8], clusters: &[Quantized], flags: u32) -> Vec<u8> {
+        let streams = codec::encode_page(clusters, flags, &codec::SourceIndex::new([])).unwrap();
+        let frame: Vec<u8> =
+            streams.iter().filter(|s| !s.is_empty()).flat_map(|s| zstd::bulk::compress(s, 3).unwrap()).collect();
+        let file = MresFile::parse(bytes.to_vec()).unwrap();
+        let start = file.pages[0].offset as usize;
+        let mut out = bytes[..start].to_vec();
+        out.extend_from_slice(&frame);
+        let rec = start - PAGE_RECORD_SIZE;
+        out[rec + PageRecord::COMPRESSED_SIZE..][..4].copy_from_slice(&(frame.len() as u32).to_le_bytes());
+        out[rec + PageRecord::RAW_SIZE..][..4].copy_from_slice(&(gpu_page(clusters, flags).len() as u32).to_le_bytes());
+        out[rec + PageRecord::CHECKSUM..][..32].copy_from_slice(blake3::hash(&frame).as_bytes());
+        let head: [u8; HEADER_SIZE] = out[..HEADER_SIZE].try_into().unwrap();
+        let table = HEADER_SIZE + file.groups.len() * GROUP_RECORD_SIZE + file.clusters.len() * CLUSTER_RECORD_SIZE;
+        let sum = meta_checksum(&head, &out[HEADER_SIZE..table], &out[table..start]);
+        out[HeaderRecord::META_CHECKSUM..][..32].copy_from_slice(&sum);
+        out
+    }
+
+    /// A compact page need not be canonical (FORMAT.md §4.3: any vertex order decodes), but a
+    /// layout page must be (§4.4): `rewrite` lays out each cluster canonically, so repacking a
+    /// compact page whose vertices are out of first-use order gives the file our writer makes,
+    /// in either coding, not a layout file that its readers refuse.
+    #[test]
+    fn rewrite_lays_out_non_canonical_pages_canonically() {
+        let dag = Dag::sample();
+        let compact = write_mres_with(&dag, 3, PageCoding::Independent).unwrap();
+        let file = MresFile::parse(compact.clone()).unwrap();
+        let (flags, layout) = (file.header.flags, file.decode_page(0).unwrap().bytes);
+        let swapped: Vec<Quantized> = (0..file.clusters.len())
+            .map(|i| {
+                let head = ClusterHeader::decode(layout[i * CLUSTER_HEADER_SIZE..].first_chunk().unwrap());
+                let mut q = EncodedCluster::from_blocks(0, NO_GROUP, head, stored_blocks(&layout, &head).unwrap())
+                    .quantized(flags);
+                // The last two vertices change places (both are used, so the order is no
+                // longer first-use).
+                let v = q.positions.len() as u8;
+                let swap = |i: u8| {
+                    if i == v - 1 {
+                        v - 2
+                    } else if i == v - 2 {
+                        v - 1
+                    } else {
+                        i
+                    }
+                };
+                q.indices.iter_mut().for_each(|i| *i = swap(*i));
+                for values in [&mut q.normals, &mut q.uvs] {
+                    values.swap(v as usize - 1, v as usize - 2);
+                }
+                q.positions.swap(v as usize - 1, v as usize - 2);
+                q
+            })
+            .collect();
+        let odd = MresFile::parse(with_page_of(&compact, &swapped, flags)).unwrap();
+        assert_ne!(odd.decode_page(0).unwrap().bytes, layout, "the page reads, in another vertex order");
+        let layout_file = write_mres_with(&dag, 3, PageCoding::Layout).unwrap();
+        assert_eq!(rewrite(&odd, 3, PageCoding::Layout).unwrap(), layout_file);
+        assert_eq!(rewrite(&odd, 3, PageCoding::Independent).unwrap(), compact);
+        MresFile::parse(layout_file).unwrap().decode_all().unwrap();
     }
 }

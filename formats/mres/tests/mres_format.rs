@@ -603,7 +603,12 @@ fn corrupt_layout_pages_are_errors_not_panics() {
     bad[ClusterHeader::NORMAL_MIN..][..2].copy_from_slice(&2000u16.to_le_bytes());
     assert!(streamed_layout(&bytes, &bad).is_ok());
     let error = parse_and_decode(with_layout(&bytes, &bad)).unwrap_err().to_string();
-    assert!(error.contains("not the one the writer lays its values out to"), "{error}");
+    assert!(error.contains("page 0: cluster 0: an octahedral value is over 2^normal_bits - 1"), "{error}");
+    // A block longer than LZ4_compressBound(raw_size) is refused before LZ4 reads it.
+    let mut long = lz4::block::compress(&raw, None, false).unwrap();
+    long.resize(raw.len() + raw.len() / 255 + 17, 0);
+    let error = parse_and_decode(with_page_bytes(&bytes, &long)).unwrap_err().to_string();
+    assert!(error.contains(&format!("LZ4 block of {} bytes", long.len())) && error.contains("at most"), "{error}");
     for at in 0..raw.len() {
         for mask in [0x01u8, 0x80, 0xff] {
             let mut flipped = raw.clone();
@@ -613,22 +618,68 @@ fn corrupt_layout_pages_are_errors_not_panics() {
     }
 }
 
+/// `bytes` changed by `edit` in its header, hierarchy or page table, and the meta checksum
+/// sealed again: a file whose only fault, if any, is the edit.
+fn with_meta(bytes: &[u8], edit: impl FnOnce(&mut [u8])) -> Vec<u8> {
+    use mres_format::records::{meta_checksum, HeaderRecord};
+    let mut v = bytes.to_vec();
+    edit(&mut v);
+    let u64_at = |at: usize| u64::from_le_bytes(v[at..at + 8].try_into().unwrap()) as usize;
+    let table = u64_at(HeaderRecord::PAGE_TABLE_OFFSET);
+    let table_end = table + u64_at(HeaderRecord::PAGE_TABLE_SIZE);
+    let head: [u8; HEADER_SIZE] = v[..HEADER_SIZE].try_into().unwrap();
+    let sum = meta_checksum(&head, &v[HEADER_SIZE..table], &v[table..table_end]);
+    v[HeaderRecord::META_CHECKSUM..][..32].copy_from_slice(&sum);
+    v
+}
+
 /// `normal_bits` means nothing in a file without normals (docs/FORMAT.md §2), so any value there
 /// reads: a layout-page file with 40 in it decodes as with 0 (found by fuzzing: the canonical
 /// check shifted by it).
 #[test]
 fn normal_bits_of_a_file_without_normals_are_ignored() {
-    use mres_format::records::{meta_checksum, HeaderRecord};
+    use mres_format::records::HeaderRecord;
     let bytes = write_mres_with(&multi_page_dag(8), 1, PageCoding::Layout).unwrap();
     let expected = MresFile::parse(bytes.clone()).unwrap().decode_all().unwrap();
-    let mut v = bytes;
-    v[HeaderRecord::NORMAL_BITS..][..4].copy_from_slice(&40u32.to_le_bytes());
-    let file = MresFile::parse(v.clone()).unwrap_err();
+    let forty = |v: &mut [u8]| v[HeaderRecord::NORMAL_BITS..][..4].copy_from_slice(&40u32.to_le_bytes());
+    let mut unsealed = bytes.clone();
+    forty(&mut unsealed);
+    let file = MresFile::parse(unsealed).unwrap_err();
     assert!(matches!(file, MresError::Checksum(_)), "{file}");
-    let table = u64::from_le_bytes(v[96..104].try_into().unwrap()) as usize;
-    let table_end = table + u64::from_le_bytes(v[104..112].try_into().unwrap()) as usize;
-    let head: [u8; HEADER_SIZE] = v[..HEADER_SIZE].try_into().unwrap();
-    let sum = meta_checksum(&head, &v[HEADER_SIZE..table], &v[table..table_end]);
-    v[112..144].copy_from_slice(&sum);
-    assert_eq!(MresFile::parse(v).unwrap().decode_all().unwrap(), expected);
+    assert_eq!(MresFile::parse(with_meta(&bytes, forty)).unwrap().decode_all().unwrap(), expected);
+}
+
+/// The hierarchy and page table must agree on where things are (docs/FORMAT.md §4.1, §5):
+/// a cluster header away from `48·i` of its page, a group naming another page than the one
+/// that holds it, and pages that skip a group are each an error of the index itself, before
+/// any page is read.
+#[test]
+fn pages_groups_and_cluster_offsets_must_agree() {
+    use mres_format::records::{ClusterRecord, GroupRecord, PageRecord};
+    use mres_format::{CLUSTER_RECORD_SIZE, GROUP_RECORD_SIZE, PAGE_RECORD_SIZE};
+    let bytes = write_mres(&far_dag(120), 1).unwrap();
+    let index = index_of(&bytes);
+    assert!(index.pages.len() > 2, "the sample has several pages");
+    let groups_at = HEADER_SIZE;
+    let clusters_at = groups_at + index.groups.len() * GROUP_RECORD_SIZE;
+    let table_at = clusters_at + index.clusters.len() * CLUSTER_RECORD_SIZE;
+    // The second cluster of the last page.
+    let c = index.pages.last().unwrap().first_cluster as usize + 1;
+    let offset = clusters_at + c * CLUSTER_RECORD_SIZE + ClusterRecord::PAGE_OFFSET;
+    let moved = with_meta(&bytes, |v| v[offset..][..4].copy_from_slice(&0u32.to_le_bytes()));
+    let e = MresIndex::parse(&moved).unwrap_err();
+    assert!(e.to_string().contains(&format!("cluster {c}: page_offset 0")), "{e}");
+    assert!(matches!(MresFile::parse(moved), Err(MresError::Corrupt(_))));
+    // The last group names page 0.
+    let g = index.groups.len() - 1;
+    let named = groups_at + g * GROUP_RECORD_SIZE + GroupRecord::PAGE;
+    assert_ne!(index.groups[g].page, 0);
+    let e = MresIndex::parse(&with_meta(&bytes, |v| v[named..][..4].copy_from_slice(&0u32.to_le_bytes()))).unwrap_err();
+    assert!(e.to_string().contains(&format!("group {g}: in page")), "{e}");
+    // Page 1 starts one group late.
+    let first_group = table_at + PAGE_RECORD_SIZE + PageRecord::FIRST_GROUP;
+    let late = (index.pages[1].first_group + 1).to_le_bytes();
+    let e = MresIndex::parse(&with_meta(&bytes, |v| v[first_group..][..4].copy_from_slice(&late))).unwrap_err();
+    assert!(e.to_string().contains("page 1: groups from"), "{e}");
+    assert!(MresIndex::parse(&with_meta(&bytes, |_| ())).is_ok(), "resealing alone breaks nothing");
 }

@@ -127,6 +127,32 @@ static uint32_t check_cluster(const MresIndex *index, const MresInfo *info, cons
     return (uint32_t)t;
 }
 
+/* The streaming path: mres_page_layout gives page `p`'s layout `gpu` (what mres_page_bytes
+   gave) from the same fetched bytes and its sources' layouts, without decoding clusters; a
+   size query first, and a buffer one byte short is refused. */
+static void check_layout(const MresIndex *index, uint32_t p, const uint8_t *bytes, size_t len,
+                         const MresPage **sources, size_t source_count, const uint8_t *gpu,
+                         size_t gpu_len) {
+    const uint8_t **layouts = malloc(sizeof *layouts * (source_count ? source_count : 1));
+    size_t *lens = malloc(sizeof *lens * (source_count ? source_count : 1));
+    EXPECT(layouts != NULL && lens != NULL, "out of memory");
+    for (size_t i = 0; i < source_count; i++) CHECK_CALL(mres_page_bytes(sources[i], &layouts[i], &lens[i]));
+    size_t need = 0;
+    CHECK_CALL(mres_page_layout(index, p, bytes, len, layouts, lens, source_count, NULL, 0, &need));
+    EXPECT(need == gpu_len, "page %u: layout size %zu, decoded %zu", p, need, gpu_len);
+    uint8_t *out = malloc(need ? need : 1);
+    EXPECT(out != NULL, "out of memory");
+    if (need > 0) {
+        MresStatus short_buffer = mres_page_layout(index, p, bytes, len, layouts, lens, source_count, out, need - 1, &need);
+        EXPECT(short_buffer == MRES_ERR_BUFFER_TOO_SMALL, "page %u: a short buffer gave %s", p, mres_status_name(short_buffer));
+    }
+    CHECK_CALL(mres_page_layout(index, p, bytes, len, layouts, lens, source_count, out, need, &need));
+    EXPECT(need == gpu_len && memcmp(out, gpu, gpu_len) == 0, "page %u: mres_page_layout differs from mres_page_bytes", p);
+    free(out);
+    free(lens);
+    free(layouts);
+}
+
 /* Fetches, decodes and checks page `p`, given `pages`, the pages decoded before it (its
    sources are among them: they come before it in the file); adds its figures to the totals
    and returns it. */
@@ -153,14 +179,15 @@ static MresPage *load_page(FILE *file, const MresIndex *index, const MresInfo *i
     *sources += source_count;
     MresPage *page = NULL;
     CHECK_CALL(mres_page_decode(index, p, bytes, got, source_handles, source_count, &page));
-    free(source_handles);
-    free(source_pages);
-    free(bytes);
 
     const uint8_t *gpu;
     size_t gpu_len;
     CHECK_CALL(mres_page_bytes(page, &gpu, &gpu_len));
     EXPECT(gpu != NULL && gpu_len == entry.raw_size, "page %u: %zu GPU bytes", p, gpu_len);
+    check_layout(index, p, bytes, got, source_handles, source_count, gpu, gpu_len);
+    free(source_handles);
+    free(source_pages);
+    free(bytes);
     *gpu_bytes += gpu_len;
     uint32_t first, count;
     CHECK_CALL(mres_page_clusters(page, &first, &count));
