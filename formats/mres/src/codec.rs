@@ -546,6 +546,10 @@ fn planes_for<const N: usize>(values: &[[u32; N]], least: usize) -> usize {
     widest.max(least)
 }
 
+/// Where [`encode_page`]'s streams hold the references (0 a new vertex, 1 a copy, 2 a far
+/// copy; FORMAT.md §4.3).
+pub(crate) const REFERENCES_STREAM: usize = 4;
+
 /// The encoded page as separate streams (preamble, index lengths, coded indices, marks, then
 /// each byte plane of the references and of each attribute), which the writer compresses one
 /// zstd frame each so that each gets its own entropy tables; their concatenation is the
@@ -609,6 +613,7 @@ pub(crate) fn encode_page(clusters: &[Quantized], flags: u32, sources: &SourceIn
     let far_planes = planes_for(&far, 0);
     let preamble = vec![planes as u8, target_planes as u8, far_planes as u8, 0];
     let mut streams = vec![preamble, lengths, coded, marks, references];
+    debug_assert_eq!(streams.len() - 1, REFERENCES_STREAM);
     streams.extend(byte_planes(&targets, target_planes));
     streams.extend(byte_planes(&far, far_planes));
     streams.extend(byte_planes(&pos, planes));

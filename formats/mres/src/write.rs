@@ -85,10 +85,22 @@ pub fn write_encoded_with(
     level: i32,
     coding: PageCoding,
 ) -> Result<Vec<u8>, WriteError> {
+    write_paged(header, groups, encoded, (level, coding), None)
+}
+
+/// [`write_encoded_with`], the pages holding `kept` groups each where given (see
+/// [`page_spans`]).
+fn write_paged(
+    header: &Header,
+    groups: &[Group],
+    encoded: Vec<EncodedCluster>,
+    (level, coding): (i32, PageCoding),
+    kept: Option<&[u32]>,
+) -> Result<Vec<u8>, WriteError> {
     let layout_flag = if coding == PageCoding::Layout { FLAG_LAYOUT_PAGES } else { 0 };
     let header = &Header { flags: (header.flags & !FLAG_LAYOUT_PAGES) | layout_flag, ..*header };
     let layout = Layout::new(groups, &encoded)?;
-    let pages = page_spans(&layout, &encoded);
+    let pages = page_spans(&layout, &encoded, kept);
     let (groups, clusters) = renumber(&layout, &pages, groups, &encoded);
     let dependencies = page_dependencies(&pages, &groups, &clusters);
     let hierarchy = encode_hierarchy(&groups, &clusters);
@@ -128,6 +140,12 @@ pub fn write_encoded_with(
 /// one with its own coding and zstd level gives its bytes; a compact file from another writer
 /// may number a cluster's vertices otherwise (§4.3 allows it) and gets them renumbered.
 pub fn rewrite(file: &MresFile, level: i32, coding: PageCoding) -> Result<Vec<u8>, WriteError> {
+    let kept: Vec<u32> = file.pages.iter().map(|p| p.group_count).collect();
+    rewrite_paged(file, (level, coding), &kept)
+}
+
+/// [`rewrite`] with pages of `kept` groups each (see [`page_spans`]).
+fn rewrite_paged(file: &MresFile, (level, coding): (i32, PageCoding), kept: &[u32]) -> Result<Vec<u8>, WriteError> {
     let most_normal = (1u64 << file.header.normal_bits.min(32)) - 1;
     let mut clusters = Vec::with_capacity(file.clusters.len());
     for (p, info) in file.pages.iter().enumerate() {
@@ -155,7 +173,7 @@ pub fn rewrite(file: &MresFile, level: i32, coding: PageCoding) -> Result<Vec<u8
             clusters.push(EncodedCluster::from_blocks(record.group, record.own_group, head, blocks));
         }
     }
-    write_encoded_with(&file.header, &file.groups, clusters, level, coding)
+    write_paged(&file.header, &file.groups, clusters, (level, coding), Some(kept))
 }
 
 /// The blocks of the cluster with header `head` as page layout `raw` stores them (each with
@@ -454,8 +472,10 @@ fn compress_page(
     }
     let records = page_records(clusters);
     // The sources as a reader holds them: their laid-out pages and cluster records (none
-    // without far copies: the decoder then reads no source).
-    let read: &[&SourceData] = if streams[0][2] != 0 { sources } else { &[] };
+    // without far copies, reference 2 in the references stream: the page then decodes alone;
+    // not the far-target plane count, which is 0 where every far target codes as 0).
+    let far_copies = streams[codec::REFERENCES_STREAM].contains(&2);
+    let read: &[&SourceData] = if far_copies { sources } else { &[] };
     let source_pages: Vec<decode::SourcePage> = read
         .iter()
         .enumerate()
@@ -594,20 +614,31 @@ struct PageSpan {
     raw_size: usize,
 }
 
-/// Greedily fills pages with whole groups in coarse-to-fine order.
-fn page_spans(layout: &Layout, encoded: &[EncodedCluster]) -> Vec<PageSpan> {
+/// Pages of whole groups in coarse-to-fine order: `kept` groups each where given and they fit
+/// (a rewritten file keeps its pages: the groups already in this order, every page holding
+/// one or more, all of them held), else filled greedily up to [`PAGE_TARGET_RAW_SIZE`].
+fn page_spans(layout: &Layout, encoded: &[EncodedCluster], kept: Option<&[u32]>) -> Vec<PageSpan> {
+    let n = layout.group_ranges.len();
     let size = |g: usize| -> usize {
         let (first, count) = layout.group_ranges[g];
         (first..first + count).map(|c| encoded[layout.cluster_order[c as usize]].size()).sum()
     };
+    let in_order = layout.group_order.iter().enumerate().all(|(new, &old)| new == old);
+    let fits = |k: &&[u32]| in_order && k.iter().all(|&c| c > 0) && k.iter().map(|&c| c as usize).sum::<usize>() == n;
+    let mut kept = kept.filter(fits).map(|k| k.iter());
     let mut spans = Vec::new();
     let mut start_group = 0usize;
-    while start_group < layout.group_ranges.len() {
+    while start_group < n {
         let mut end_group = start_group;
         let mut raw_size = 0usize;
-        while end_group < layout.group_ranges.len() {
+        let count = kept.as_mut().and_then(|k| k.next()).map(|&c| c as usize);
+        while end_group < n {
             let group_size = size(end_group);
-            if end_group > start_group && raw_size + group_size > PAGE_TARGET_RAW_SIZE {
+            let full = match count {
+                Some(c) => end_group - start_group == c,
+                None => end_group > start_group && raw_size + group_size > PAGE_TARGET_RAW_SIZE,
+            };
+            if full {
                 break;
             }
             raw_size += group_size;
@@ -1263,5 +1294,23 @@ mod tests {
         assert_eq!(rewrite(&odd, 3, PageCoding::Layout).unwrap(), layout_file);
         assert_eq!(rewrite(&odd, 3, PageCoding::Independent).unwrap(), compact);
         MresFile::parse(layout_file).unwrap().decode_all().unwrap();
+    }
+
+    /// `rewrite` keeps the input's pages (the groups each holds), not the writer's fill: a
+    /// file of one group per page repacks to one group per page, and back to its own bytes.
+    /// The sample's level-0 page then copies every vertex of its first cluster from the root's
+    /// page with far targets that all code as 0 (no far-target byte plane): the writer's check
+    /// once took that for "no far copies", decoded without the sources and failed.
+    #[test]
+    fn rewrite_keeps_the_pages() {
+        let greedy = MresFile::parse(write_mres(&Dag::sample(), 3).unwrap()).unwrap();
+        let one_each = vec![1u32; greedy.groups.len()];
+        assert!(greedy.pages.len() < one_each.len(), "the writer's own fill puts groups together");
+        let write =
+            |coding| rewrite_paged(&greedy, (3, coding), &one_each).unwrap_or_else(|e| panic!("{coding:?}: {e}"));
+        let (compact, layout) = (write(PageCoding::FarCopies), write(PageCoding::Layout));
+        assert_eq!(MresFile::parse(layout.clone()).unwrap().pages.len(), one_each.len());
+        assert_eq!(rewrite(&MresFile::parse(compact.clone()).unwrap(), 3, PageCoding::Layout).unwrap(), layout);
+        assert_eq!(rewrite(&MresFile::parse(layout).unwrap(), 3, PageCoding::FarCopies).unwrap(), compact);
     }
 }

@@ -56,10 +56,10 @@ enum Command {
     /// `--pages layout` stores each page's GPU layout in LZ4 (about twice the bytes; pages
     /// decode at memory speed, each alone), `--pages compact` predicts and zstd-codes them (the
     /// bake's default, the smallest files). Every page is read and checked first; groups,
-    /// clusters and their values are unchanged, so every cut draws the same triangles. Files
-    /// mres wrote keep every GPU layout, and repacking back gives their bytes; a compact file
-    /// from another writer gets each cluster in the canonical layout (what layout pages require:
-    /// vertices renumbered in first-use order) and pages filled as mres fills them.
+    /// clusters, their values and the pages (the groups each holds) are unchanged, so every
+    /// cut draws the same triangles. Files mres wrote keep every GPU layout, and repacking back
+    /// gives their bytes; a compact file from another writer gets each cluster in the
+    /// canonical layout (what layout pages require: vertices renumbered in first-use order).
     Repack(RepackArgs),
     /// Maintain the bake cache of `bake-all`.
     Cache(CacheArgs),
