@@ -1313,4 +1313,112 @@ mod tests {
         assert_eq!(rewrite(&MresFile::parse(compact.clone()).unwrap(), 3, PageCoding::Layout).unwrap(), layout);
         assert_eq!(rewrite(&MresFile::parse(layout).unwrap(), 3, PageCoding::FarCopies).unwrap(), compact);
     }
+
+    /// A two-level DAG of `n` level-0 groups of one cluster each and a root group of `n`
+    /// clusters, with normals, UVs and materials; each level-0 cluster repeats some vertices of
+    /// a root cluster (far copies, when their pages differ) and of its neighbour before it
+    /// (copies). Pseudo-random from `seed`.
+    fn shared_vertex_dag(n: u32, seed: u64) -> Dag {
+        let mut state = seed;
+        let mut next = move |m: u32| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 33) as u32) % m
+        };
+        let cluster = |group: u32, own_group: u32, next: &mut dyn FnMut(u32) -> u32| {
+            let v = 8 + next(56) as usize;
+            let t = 4 + next(60) as usize;
+            DagCluster {
+                group,
+                own_group,
+                positions: (0..v).map(|_| [next(4000) as i32, next(4000) as i32, next(50) as i32]).collect(),
+                normals: (0..v).map(|_| [0.0, 0.6, 0.8]).collect(),
+                uvs: (0..v).map(|_| [next(1000) as f32 / 1000.0, 0.5]).collect(),
+                indices: (0..t)
+                    .flat_map(|k| {
+                        // Three distinct corners (the codec keeps no degenerate triangle);
+                        // the first triangles use every vertex.
+                        if 3 * k + 2 < v {
+                            return [3 * k, 3 * k + 1, 3 * k + 2].map(|i| i as u8);
+                        }
+                        let a = next(v as u32);
+                        let b = (a + 1 + next(v as u32 - 1)) % v as u32;
+                        let c = (a + next(v as u32)..).map(|c| c % v as u32).find(|&c| c != a && c != b).unwrap_or(0);
+                        [a, b, c].map(|i| i as u8)
+                    })
+                    .collect(),
+                materials: (0..t).map(|_| next(3) as u16).collect(),
+                open_edges: Vec::new(),
+            }
+        };
+        let mut clusters: Vec<DagCluster> = (0..n).map(|g| cluster(g, NO_GROUP, &mut next)).collect();
+        let coarse: Vec<DagCluster> = (0..n).map(|g| cluster(n, g, &mut next)).collect();
+        for g in 0..n as usize {
+            let (v, w) = (clusters[g].positions.len(), coarse[g].positions.len());
+            for k in 0..v.min(w) / (1 + next(3) as usize) {
+                let (from, to) = (next(w as u32) as usize, next(v as u32) as usize);
+                clusters[g].positions[to] = coarse[g].positions[from];
+                clusters[g].uvs[to] = coarse[g].uvs[from];
+                if g > 0 && k % 4 == 0 {
+                    let before = &clusters[g - 1];
+                    let at = next(before.positions.len() as u32) as usize;
+                    let (p, uv) = (before.positions[at], before.uvs[at]);
+                    (clusters[g].positions[to], clusters[g].uvs[to]) = (p, uv);
+                }
+            }
+        }
+        clusters.extend(coarse);
+        let sphere = Sphere { center: [1.0; 3], radius: 2.0 };
+        let group = |error, level| Group { sphere, error, level, first_cluster: 0, cluster_count: 0, page: 0 };
+        let mut groups: Vec<Group> = (0..n).map(|_| group(0.01, 0)).collect();
+        groups.push(group(f32::INFINITY, 1));
+        let uv = UvQuant { min: [0.0; 2], extent: [1.0; 2] };
+        let flags = FLAG_NORMALS | FLAG_UVS | FLAG_MATERIALS;
+        let grid = Grid { origin: [0.0; 3], step: 0.001 };
+        let header =
+            Header { flags, grid, uv, normal_bits: 10, position_bits: 16, level_count: 0, source_triangles: 0 };
+        Dag { header, groups, clusters }
+    }
+
+    /// Any pagination writes and reads in every coding: for pseudo-random DAGs cut into
+    /// pseudo-random runs of groups, the compact (far copies), independent and layout files
+    /// decode to the same GPU layouts, page by page, and `rewrite` turns each into the others
+    /// byte for byte.
+    #[test]
+    fn any_pagination_round_trips_in_every_coding() {
+        let mut copying = 0;
+        for seed in 0..24u64 {
+            let greedy =
+                MresFile::parse(write_mres(&shared_vertex_dag(6 + seed as u32 % 7, seed), 3).unwrap()).unwrap();
+            let n = greedy.groups.len() as u32;
+            let mut state = seed;
+            let mut kept = Vec::new();
+            while kept.iter().sum::<u32>() < n {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let left = n - kept.iter().sum::<u32>();
+                kept.push(1 + ((state >> 33) as u32) % left.min(4));
+            }
+            let files: Vec<Vec<u8>> = [PageCoding::FarCopies, PageCoding::Independent, PageCoding::Layout]
+                .iter()
+                .map(|&coding| {
+                    rewrite_paged(&greedy, (3, coding), &kept)
+                        .unwrap_or_else(|e| panic!("seed {seed}, {coding:?}: {e}"))
+                })
+                .collect();
+            copying += (files[0].len() < files[1].len()) as usize; // far copies made it smaller
+            let read: Vec<MresFile> = files.iter().map(|f| MresFile::parse(f.clone()).unwrap()).collect();
+            for p in 0..kept.len() as u32 {
+                let layout = read[0].page(p).unwrap();
+                assert!(read[1..].iter().all(|r| r.page(p).unwrap() == layout), "seed {seed}, page {p}");
+            }
+            assert_eq!(read[0].decode_all().unwrap(), greedy.decode_all().unwrap(), "seed {seed}");
+            for (from, f) in read.iter().enumerate() {
+                for (to, coding) in
+                    [PageCoding::FarCopies, PageCoding::Independent, PageCoding::Layout].into_iter().enumerate()
+                {
+                    assert_eq!(rewrite(f, 3, coding).unwrap(), files[to], "seed {seed}: {from} → {to}");
+                }
+            }
+        }
+        assert!(copying >= 12, "far copies in only {copying} of 24 files");
+    }
 }
