@@ -76,11 +76,15 @@ pub unsafe extern "C" fn mres_page_decode(
     })
 }
 
-/// Checks `len` bytes at `bytes` (the caller's fetch of `mres_page_range(index, page)`) as
-/// `mres_page_decode` does and writes the page's GPU layout (docs/FORMAT.md §5, the bytes
-/// `mres_page_bytes` gives) to `out`, without decoding its clusters into arrays: the path for
-/// a streamer that uploads pages. Layout pages (`MRES_FLAG_LAYOUT_PAGES`) take it at over a
-/// gigabyte of layout per second per core; `mres_page_decode` also unpacks every cluster.
+/// Checks `len` bytes at `bytes` (the caller's fetch of `mres_page_range(index, page)`) and
+/// writes the page's GPU layout (docs/FORMAT.md §5, the bytes `mres_page_bytes` gives) to
+/// `out`, without decoding its clusters into arrays: the path for a streamer that uploads
+/// pages. The bytes are checked as `mres_page_decode` checks them (length, BLAKE3, the
+/// encoding), but for layout pages (`MRES_FLAG_LAYOUT_PAGES`) only what a renderer relies on
+/// (docs/FORMAT.md §4.4's list: counts, block places, indices in range, zero padding), not
+/// the rest of the canonical form, which needs every value unpacked (`mres_page_decode` and
+/// the validators check it). Layout pages take this path at over a gigabyte of layout per
+/// second per core.
 ///
 /// The layout is `raw_size` bytes (`mres_index_page`); `*count` receives that. With `out` null
 /// and `cap` 0 nothing is decoded (a size query); a `cap` below it gives

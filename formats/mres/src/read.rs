@@ -123,8 +123,10 @@ impl MresIndex {
 
     /// [`MresIndex::decode_page`] up to the GPU layout only ([`Page::bytes`], what a streamer
     /// uploads and later pages take as a source), without decoding the clusters from it: the
-    /// same checks of the bytes, the sources and the encoding, the layout valid by
-    /// construction (FORMAT.md §7).
+    /// same checks of the bytes, the sources and the encoding, a compact page's layout valid by
+    /// construction (FORMAT.md §7). A layout page gets §4.4's structural checks (what a
+    /// renderer relies on), not the rest of the canonical form, which needs every value
+    /// unpacked ([`MresIndex::decode_page`] checks it).
     pub fn page_layout(&self, p: u32, compressed: &[u8], sources: &[&[u8]]) -> Result<Vec<u8>, MresError> {
         decompress_page(&self.header, &self.clusters, &self.pages, p, compressed, sources)
     }

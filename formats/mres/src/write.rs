@@ -100,7 +100,7 @@ fn write_paged(
     let layout_flag = if coding == PageCoding::Layout { FLAG_LAYOUT_PAGES } else { 0 };
     let header = &Header { flags: (header.flags & !FLAG_LAYOUT_PAGES) | layout_flag, ..*header };
     let layout = Layout::new(groups, &encoded)?;
-    let pages = page_spans(&layout, &encoded, kept);
+    let pages = page_spans(&layout, &encoded, kept, header.flags);
     let (groups, clusters) = renumber(&layout, &pages, groups, &encoded);
     let dependencies = page_dependencies(&pages, &groups, &clusters);
     let hierarchy = encode_hierarchy(&groups, &clusters);
@@ -459,6 +459,15 @@ fn compress_page(
     if header.flags & FLAG_LAYOUT_PAGES != 0 {
         return layout_page(raw, clusters, header);
     }
+    let records = page_records(clusters);
+    let most = codec::max_encoded_len(header.flags, &records);
+    if most > MAX_PAGE_ENCODED_SIZE {
+        return Err(WriteError::BadDag(format!(
+            "a page's {} clusters could encode to {most} bytes, over the {MAX_PAGE_ENCODED_SIZE} bytes readers \
+             accept (FORMAT.md §4.3): store it in smaller pages or as layout pages",
+            clusters.len()
+        )));
+    }
     let quantized: Vec<Quantized> = clusters.iter().map(|c| c.quantized(header.flags)).collect();
     let index = codec::SourceIndex::new(sources.iter().map(|s| &s.keys));
     let codec_bug = || WriteError::BadDag("the page encoding does not decode to the page (a writer bug)".into());
@@ -470,7 +479,6 @@ fn compress_page(
             encoded.len()
         )));
     }
-    let records = page_records(clusters);
     // The sources as a reader holds them: their laid-out pages and cluster records (none
     // without far copies, reference 2 in the references stream: the page then decodes alone;
     // not the far-target plane count, which is 0 where every far target codes as 0).
@@ -615,47 +623,63 @@ struct PageSpan {
 }
 
 /// Pages of whole groups in coarse-to-fine order: `kept` groups each where given and they fit
-/// (a rewritten file keeps its pages: the groups already in this order, every page holding
-/// one or more, all of them held), else filled greedily up to [`PAGE_TARGET_RAW_SIZE`].
-fn page_spans(layout: &Layout, encoded: &[EncodedCluster], kept: Option<&[u32]>) -> Vec<PageSpan> {
+/// (a rewritten file keeps its pages: the groups already in this order, all of them held, and
+/// for compact pages every page within the encoded-size limit readers accept, `E_max`;
+/// pages of no group are dropped), else filled greedily up to [`PAGE_TARGET_RAW_SIZE`].
+fn page_spans(layout: &Layout, encoded: &[EncodedCluster], kept: Option<&[u32]>, flags: u32) -> Vec<PageSpan> {
     let n = layout.group_ranges.len();
     let size = |g: usize| -> usize {
         let (first, count) = layout.group_ranges[g];
         (first..first + count).map(|c| encoded[layout.cluster_order[c as usize]].size()).sum()
     };
     let in_order = layout.group_order.iter().enumerate().all(|(new, &old)| new == old);
-    let fits = |k: &&[u32]| in_order && k.iter().all(|&c| c > 0) && k.iter().map(|&c| c as usize).sum::<usize>() == n;
-    let mut kept = kept.filter(fits).map(|k| k.iter());
-    let mut spans = Vec::new();
-    let mut start_group = 0usize;
-    while start_group < n {
-        let mut end_group = start_group;
-        let mut raw_size = 0usize;
-        let count = kept.as_mut().and_then(|k| k.next()).map(|&c| c as usize);
-        while end_group < n {
-            let group_size = size(end_group);
-            let full = match count {
-                Some(c) => end_group - start_group == c,
-                None => end_group > start_group && raw_size + group_size > PAGE_TARGET_RAW_SIZE,
-            };
-            if full {
-                break;
-            }
-            raw_size += group_size;
-            end_group += 1;
+    let kept: Vec<usize> = kept.unwrap_or_default().iter().filter(|&&c| c > 0).map(|&c| c as usize).collect();
+    if in_order && !kept.is_empty() && kept.iter().sum::<usize>() == n {
+        let spans = spans_ending(layout, &size, kept.iter().scan(0, |end, &c| Some(*end + c).inspect(|&e| *end = e)));
+        let within = |p: &PageSpan| {
+            let clusters = &layout.cluster_order[p.first_cluster as usize..][..p.cluster_count as usize];
+            let records: Vec<&EncodedCluster> = clusters.iter().map(|&c| &encoded[c]).collect();
+            codec::max_encoded_len(flags, &page_records(&records)) <= MAX_PAGE_ENCODED_SIZE
+        };
+        if flags & FLAG_LAYOUT_PAGES != 0 || spans.iter().all(within) {
+            return spans;
         }
+    }
+    let mut ends = Vec::new();
+    let (mut end, mut raw_size) = (0, 0);
+    while end < n {
+        let group_size = size(end);
+        if ends.last().copied().unwrap_or(0) < end && raw_size + group_size > PAGE_TARGET_RAW_SIZE {
+            ends.push(end);
+            raw_size = 0;
+        }
+        raw_size += group_size;
+        end += 1;
+    }
+    if n > 0 {
+        ends.push(n);
+    }
+    spans_ending(layout, &size, ends.into_iter())
+}
+
+/// The pages ending before the groups `ends` (ascending, the last the group count), with
+/// `size(g)` the layout bytes of group `g`.
+fn spans_ending(layout: &Layout, size: &dyn Fn(usize) -> usize, ends: impl Iterator<Item = usize>) -> Vec<PageSpan> {
+    let mut start_group = 0;
+    ends.map(|end_group| {
         let first_cluster = layout.group_ranges[start_group].0;
         let (last_first, last_count) = layout.group_ranges[end_group - 1];
-        spans.push(PageSpan {
+        let span = PageSpan {
             first_cluster,
             cluster_count: last_first + last_count - first_cluster,
             first_group: start_group as u32,
             group_count: (end_group - start_group) as u32,
-            raw_size,
-        });
+            raw_size: (start_group..end_group).map(size).sum(),
+        };
         start_group = end_group;
-    }
-    spans
+        span
+    })
+    .collect()
 }
 
 /// Lays out a page: all cluster headers first, then the data blocks grouped by kind (every
@@ -1420,5 +1444,55 @@ mod tests {
             }
         }
         assert!(copying >= 12, "far copies in only {copying} of 24 files");
+    }
+
+    /// A layout page may hold more clusters than a compact page can (its counts' `E_max` over
+    /// the 32 MiB readers accept of a compact page): repacked to compact, such a page is
+    /// refilled instead of kept (which would write a page every reader refuses).
+    #[test]
+    fn kept_pages_over_the_compact_limit_are_refilled() {
+        let n = 5300u32;
+        let mut state = 7u64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 33) as u32
+        };
+        let mut cluster = |group: u32, own_group: u32| DagCluster {
+            group,
+            own_group,
+            // Few position bits: a small layout, while `E_max` counts 12 bytes a vertex.
+            positions: (0..255).map(|_| [(next() % 4) as i32, (next() % 4) as i32, (next() % 4) as i32]).collect(),
+            normals: vec![[0.0, 0.6, 0.8]; 255],
+            uvs: (0..255).map(|_| [(next() % 1000) as f32 / 1000.0, 0.5]).collect(),
+            indices: (0..128u32).flat_map(|t| [t, t + 1, t + 2].map(|i| (i * 2 % 255) as u8)).collect(),
+            materials: Vec::new(),
+            open_edges: Vec::new(),
+        };
+        // Coarse to fine already (the root group first), so that pages can be kept.
+        let mut clusters = vec![cluster(0, 1)];
+        clusters.extend((1..=n).map(|g| cluster(g, NO_GROUP)));
+        let sphere = Sphere { center: [1.0; 3], radius: 2.0 };
+        let group = |error, level| Group { sphere, error, level, first_cluster: 0, cluster_count: 0, page: 0 };
+        let mut groups = vec![group(f32::INFINITY, 1)];
+        groups.extend((0..n).map(|_| group(0.01, 0)));
+        let uv = UvQuant { min: [0.0; 2], extent: [1.0; 2] };
+        let grid = Grid { origin: [0.0; 3], step: 1e-6 };
+        let flags = FLAG_NORMALS | FLAG_UVS;
+        let header =
+            Header { flags, grid, uv, normal_bits: 10, position_bits: 20, level_count: 0, source_triangles: 0 };
+        let dag = Dag { header, groups, clusters };
+        let encoded = dag.clusters.iter().enumerate().map(|(i, c)| EncodedCluster::new(c, &dag.header, i).unwrap());
+        let one_page = [1, n];
+        let layout = write_paged(&dag.header, &dag.groups, encoded.collect(), (3, PageCoding::Layout), Some(&one_page));
+        let layout = MresFile::parse(layout.unwrap()).unwrap();
+        let records = &layout.clusters[1..];
+        assert_eq!(layout.pages.len(), 2, "the level-0 groups in one layout page");
+        assert!(codec::max_encoded_len(flags, records) > MAX_PAGE_ENCODED_SIZE, "a page over the compact limit");
+        let compact = MresFile::parse(rewrite(&layout, 3, PageCoding::Independent).unwrap()).unwrap();
+        assert!(compact.pages.len() > 2, "refilled");
+        compact.decode_all().unwrap();
+        // Asked again for the one page, the writer refills it too.
+        let again = MresFile::parse(rewrite_paged(&compact, (3, PageCoding::FarCopies), &[1, n]).unwrap()).unwrap();
+        assert_eq!(again.pages.len(), compact.pages.len());
     }
 }

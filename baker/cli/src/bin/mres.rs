@@ -59,7 +59,9 @@ enum Command {
     /// clusters, their values and the pages (the groups each holds) are unchanged, so every
     /// cut draws the same triangles. Files mres wrote keep every GPU layout, and repacking back
     /// gives their bytes; a compact file from another writer gets each cluster in the
-    /// canonical layout (what layout pages require: vertices renumbered in first-use order).
+    /// canonical layout (what layout pages require: vertices renumbered in first-use order),
+    /// and pages are filled anew where its groups are not coarse to fine or a layout page is
+    /// too large for a compact one (docs/FORMAT.md §4.4).
     Repack(RepackArgs),
     /// Maintain the bake cache of `bake-all`.
     Cache(CacheArgs),
