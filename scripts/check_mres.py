@@ -897,7 +897,7 @@ class Checker:
             r.violations_where("group_page", (owner != self.gpage),
                                lambda g: f"group {g}: record says page {self.gpage[g]} but page {owner[g]}'s group range holds it")
             if P and not (self.pgfirst == np.concatenate([[0], np.cumsum(self.pgcount)[:-1]])).all():
-                r.note("page_group_order", "page group ranges are not in page order")
+                r.violation("page_group_order", "page group ranges are not in page order (section 4.1: pages tile the groups in order)")
         # a group's clusters lie inside its page (section 7)
         gp_ok = self.group_ok & (self.gpage < P)
         gps = np.where(gp_ok, self.gpage, 0)

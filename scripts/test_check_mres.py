@@ -1196,3 +1196,31 @@ def test_non_canonical_layout_of_the_values_is_rejected(baked, layout, which, me
         store_layout(data, 0, layout_page(cls, struct.unpack_from("<I", compact, 12)[0]))
     proc = run_on(layout, "sphere", f"layout-{which}", mutate)
     assert_layout_caught(proc, "page_layout", message)
+
+
+@pytest.mark.parametrize("which, kind", [("page_offset", "cluster_page_offset"), ("group_page", "group_page"),
+                                         ("group_range", "page_group_order")])
+def test_hierarchy_and_page_table_must_agree(paged, which, kind):
+    """Section 4.1 and 5: a cluster header away from 48*i of its page, a group
+    naming another page than the one holding it, and pages whose group ranges
+    are out of order (two pages' swapped) are violations here and errors of
+    the Rust reader (`mres validate` fails)."""
+    def mutate(data):
+        h = header(data)
+        last = page(data, h["P"] - 1)
+        if which == "page_offset":
+            off = 160 + 40 * h["G"] + 16 * (last["first"] + 1) + 12
+            struct.pack_into("<I", data, off, 0)
+        elif which == "group_page":
+            struct.pack_into("<I", data, group(data, h["G"] - 1)["off"] + 32, 0)
+        else:
+            a, b = h["pt_off"] + 72 * 1 + 56, h["pt_off"] + 72 * 2 + 56
+            ra, rb = bytes(data[a:a + 8]), bytes(data[b:b + 8])
+            data[a:a + 8], data[b:b + 8] = rb, ra
+        fix_meta_checksum(data)
+    path = corrupted(paged, "sphere", f"agree-{which}", mutate)
+    proc = run_checker(path, *FAST)
+    assert_caught(proc, kind)
+    assert f"VIOLATION [{kind}]" in proc.stdout, proc.stdout
+    rust = subprocess.run([str(MRES), "validate", str(path)], capture_output=True, text=True)
+    assert rust.returncode != 0 and "corrupt" in (rust.stdout + rust.stderr).lower(), rust.stdout + rust.stderr
