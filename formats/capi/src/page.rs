@@ -132,6 +132,9 @@ pub unsafe extern "C" fn mres_page_layout(
                 format!("the buffer holds {cap} bytes; page {page}'s layout is {raw_size}"),
             ));
         }
+        if out.is_null() {
+            return Err(Failure::arg(format!("out is null but cap is {cap}")));
+        }
         // SAFETY: the caller's contract, as documented.
         let layouts = unsafe { raw_sources(sources, source_lens, source_count)? };
         let layout = index.page_layout(page, compressed, &layouts)?;

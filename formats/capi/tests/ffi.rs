@@ -508,6 +508,10 @@ fn page_layouts_stream_without_handles() {
         );
         assert_eq!(count, raw_size);
         assert_eq!(layout_with(index, p, &bytes, &sources, raw_size - 1), Err(MresStatus::MRES_ERR_BUFFER_TOO_SMALL));
+        // SAFETY: a null output with a capacity: refused before anything is decoded.
+        let null_out =
+            unsafe { mres_page_layout(index, p, null(), 0, null(), null(), 0, null_mut(), raw_size, &mut count) };
+        assert_eq!(null_out, MresStatus::MRES_ERR_ARG);
         let layout = layout_with(index, p, &bytes, &sources, raw_size + 7).unwrap();
         assert_eq!(layout, rust.page_layout(p, &bytes, &sources).unwrap());
         if !sources.is_empty() {
