@@ -67,14 +67,16 @@ mod layout_pages;
 pub mod page;
 pub mod read;
 pub mod records;
+pub mod repack;
 pub mod select;
 pub mod write;
 
 pub use page::{DecodedCluster, Page};
 pub use read::{MresError, MresFile, MresIndex};
 pub use records::ClusterHeader;
+pub use repack::rewrite;
 pub use select::{uniform_cut, view_cut, ViewParams};
-pub use write::{rewrite, write_mres, write_mres_with, PageCoding};
+pub use write::{write_mres, write_mres_with, PageCoding};
 
 /// File magic, the first four bytes.
 pub const MAGIC: [u8; 4] = *b"MRES";
@@ -303,7 +305,7 @@ impl DagCluster {
     /// The writer's form of a cluster read back from a file (decoded data and its hierarchy
     /// record). Writing it again gives the same bytes only where its decoded normals and UVs
     /// quantize back to the stored values, which floats do not promise (a few per page differ
-    /// by one step); [`write::rewrite`] rewrites a file exactly.
+    /// by one step); [`repack::rewrite`] rewrites a file exactly.
     pub fn from_decoded(d: DecodedCluster, info: &ClusterInfo) -> DagCluster {
         DagCluster {
             group: info.group,
