@@ -197,23 +197,36 @@ pub(crate) unsafe fn put<T>(ptr: *mut T, what: &str, value: T) -> Outcome {
 /// `usize`.
 pub(crate) unsafe fn copy_out<T: Copy>(src: &[T], out: *mut T, cap: usize, count: *mut usize) -> Outcome {
     // SAFETY: the caller's contract.
-    unsafe { put(count, "count", src.len())? };
-    if out.is_null() && cap == 0 {
-        return Ok(());
+    if unsafe { room(src.len(), out, cap, count)? } {
+        // SAFETY: `out` is non-null and holds `cap >= src.len()` elements (the caller's
+        // contract); a caller's buffer cannot overlap the library's own data.
+        unsafe { std::ptr::copy_nonoverlapping(src.as_ptr(), out, src.len()) };
     }
-    if src.len() > cap {
+    Ok(())
+}
+
+/// [`copy_out`]'s checks for `len` elements, before they exist (a caller that would decode
+/// them first asks here): stores `len` in `*count`; `false` for a size query (`out` null,
+/// `cap` 0), `true` where `out` holds them, else the failure.
+///
+/// # Safety
+/// As for [`copy_out`].
+pub(crate) unsafe fn room<T>(len: usize, out: *mut T, cap: usize, count: *mut usize) -> Result<bool, Failure> {
+    // SAFETY: the caller's contract.
+    unsafe { put(count, "count", len)? };
+    if out.is_null() && cap == 0 {
+        return Ok(false);
+    }
+    if len > cap {
         return Err(Failure::new(
             MresStatus::MRES_ERR_BUFFER_TOO_SMALL,
-            format!("the buffer holds {cap} elements, {} are needed", src.len()),
+            format!("the buffer holds {cap} elements, {len} are needed"),
         ));
     }
     if out.is_null() {
         return Err(Failure::arg(format!("out is null but cap is {cap}")));
     }
-    // SAFETY: `out` is non-null and holds `cap >= src.len()` elements (the caller's
-    // contract); a caller's buffer cannot overlap the library's own data.
-    unsafe { std::ptr::copy_nonoverlapping(src.as_ptr(), out, src.len()) };
-    Ok(())
+    Ok(true)
 }
 
 #[cfg(test)]

@@ -1,7 +1,7 @@
 //! The page handle: decoding a page from bytes the caller fetched, its GPU-layout bytes, and
 //! each cluster's decoded arrays copied into caller buffers.
 
-use crate::ffi::{call, copy_out, get, put, Failure, MresStatus, Outcome};
+use crate::ffi::{call, copy_out, get, put, room, Failure, MresStatus, Outcome};
 use crate::index::MresIndex;
 use mres_format::{DecodedCluster, Grid, Page};
 
@@ -120,20 +120,10 @@ pub unsafe extern "C" fn mres_page_layout(
         // SAFETY: the caller's contract, as documented.
         let (index, compressed) = unsafe { (&get(index, "index")?.inner, crate::ffi::bytes(bytes, len, "bytes")?) };
         let raw_size = crate::index::item(&index.pages, page, "page")?.raw_size as usize;
-        // Only the size, before anything is decoded.
+        // The size and the room for it, before anything is decoded.
         // SAFETY: the caller's contract, as documented.
-        unsafe { put(count, "count", raw_size)? };
-        if out.is_null() && cap == 0 {
+        if !unsafe { room(raw_size, out, cap, count)? } {
             return Ok(());
-        }
-        if cap < raw_size {
-            return Err(Failure::new(
-                MresStatus::MRES_ERR_BUFFER_TOO_SMALL,
-                format!("the buffer holds {cap} bytes; page {page}'s layout is {raw_size}"),
-            ));
-        }
-        if out.is_null() {
-            return Err(Failure::arg(format!("out is null but cap is {cap}")));
         }
         // SAFETY: the caller's contract, as documented.
         let layouts = unsafe { raw_sources(sources, source_lens, source_count)? };

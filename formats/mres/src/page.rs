@@ -197,8 +197,8 @@ pub(crate) fn page_from_layout(
         };
         let again = write::relaid(&bytes, &headers, header.flags, header.normal_bits)
             .map_err(|(i, what)| not_canonical(i, what))?;
-        let differs = again.iter().zip(&bytes).position(|(a, b)| a != b);
-        if let Some(at) = differs.or((again.len() != bytes.len()).then(|| again.len().min(bytes.len()))) {
+        if again != bytes {
+            let at = again.iter().zip(&bytes).position(|(a, b)| a != b).unwrap_or(again.len().min(bytes.len()));
             return Err(not_canonical(
                 cluster_at(&headers, at),
                 &format!("byte {at} differs (minima or bit widths not exact)"),

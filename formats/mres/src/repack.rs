@@ -3,7 +3,7 @@
 //! groups and, where they fit, the pages kept, and the file written again by [`crate::write`].
 
 use super::records::ClusterHeader;
-use super::write::{canonical, gpu_blocks, is_canonical, stored_blocks, write_paged, EncodedCluster, WriteError};
+use super::write::{canonical, canonical_fault, gpu_blocks, stored_blocks, write_paged, EncodedCluster, WriteError};
 use super::*;
 
 /// `file` written again with its pages stored as `coding` says (what `mres repack` does): the
@@ -21,7 +21,6 @@ pub fn rewrite(file: &MresFile, level: i32, coding: PageCoding) -> Result<Vec<u8
 
 /// [`rewrite`] with pages of `kept` groups each (see [`crate::write`]'s page filling).
 fn rewrite_paged(file: &MresFile, (level, coding): (i32, PageCoding), kept: &[u32]) -> Result<Vec<u8>, WriteError> {
-    let most_normal = (1u64 << file.header.normal_bits.min(32)) - 1;
     let mut clusters = Vec::with_capacity(file.clusters.len());
     for (p, info) in file.pages.iter().enumerate() {
         let layout = file.decode_page(p as u32)?.bytes;
@@ -37,13 +36,11 @@ fn rewrite_paged(file: &MresFile, (level, coding): (i32, PageCoding), kept: &[u3
                 EncodedCluster::from_blocks(0, NO_GROUP, head, stored_blocks(&layout, &head).ok_or_else(missing)?);
             let bad =
                 |problem: &str| WriteError::BadCluster { cluster: first + i, problem: format!("page {p}: {problem}") };
-            let q = stored.quantized(file.header.flags);
-            if q.normals.iter().flatten().any(|&n| n as u64 > most_normal) {
-                return Err(bad("an octahedral normal value is over 2^normal_bits - 1"));
+            let q = canonical(stored.quantized(file.header.flags))
+                .ok_or_else(|| bad("meshoptimizer's index codec does not give its triangles back"))?;
+            if let Some(fault) = canonical_fault(&q, file.header.normal_bits) {
+                return Err(bad(fault));
             }
-            let q = canonical(q).filter(is_canonical).ok_or_else(|| {
-                bad("meshoptimizer's index codec does not give its triangles back in a canonical form")
-            })?;
             let (head, blocks) = gpu_blocks(&q, file.header.flags);
             clusters.push(EncodedCluster::from_blocks(record.group, record.own_group, head, blocks));
         }

@@ -543,23 +543,14 @@ pub(crate) fn relaid(
     flags: u32,
     normal_bits: u32,
 ) -> Result<Vec<u8>, (usize, &'static str)> {
-    // `normal_bits` is 4..=16 in a file with normals and unchecked in one without (which has
-    // no octahedral values to bound), so the shift is done wide.
-    let most = (1u64 << normal_bits.min(32)) - 1;
     let clusters: Vec<EncodedCluster> = headers
         .iter()
         .enumerate()
         .map(|(i, h)| {
             let blocks = stored_blocks(raw, h).ok_or((i, "a block lies outside the page"))?;
             let q = EncodedCluster::from_blocks(0, NO_GROUP, *h, blocks).quantized(flags);
-            if q.normals.iter().flatten().any(|&n| n as u64 > most) {
-                return Err((i, "an octahedral value is over 2^normal_bits - 1"));
-            }
-            if !is_canonical(&q) {
-                return Err((
-                    i,
-                    "its vertices are not in first-use order or its triangles not as the index codec gives them back",
-                ));
+            if let Some(fault) = canonical_fault(&q, normal_bits) {
+                return Err((i, fault));
             }
             let (header, blocks) = gpu_blocks(&q, flags);
             Ok(EncodedCluster::from_blocks(0, NO_GROUP, header, blocks))
@@ -583,14 +574,15 @@ struct PageSpan {
 /// pages of no group are dropped), else filled greedily up to [`PAGE_TARGET_RAW_SIZE`].
 fn page_spans(layout: &Layout, encoded: &[EncodedCluster], kept: Option<&[u32]>, flags: u32) -> Vec<PageSpan> {
     let n = layout.group_ranges.len();
-    let size = |g: usize| -> usize {
-        let (first, count) = layout.group_ranges[g];
-        (first..first + count).map(|c| encoded[layout.cluster_order[c as usize]].size()).sum()
-    };
+    let sizes: Vec<usize> = layout
+        .group_ranges
+        .iter()
+        .map(|&(first, count)| (first..first + count).map(|c| encoded[layout.cluster_order[c as usize]].size()).sum())
+        .collect();
     let in_order = layout.group_order.iter().enumerate().all(|(new, &old)| new == old);
     let kept: Vec<usize> = kept.unwrap_or_default().iter().filter(|&&c| c > 0).map(|&c| c as usize).collect();
     if in_order && !kept.is_empty() && kept.iter().sum::<usize>() == n {
-        let spans = spans_ending(layout, &size, kept.iter().scan(0, |end, &c| Some(*end + c).inspect(|&e| *end = e)));
+        let spans = spans_ending(layout, &sizes, kept.iter().scan(0, |end, &c| Some(*end + c).inspect(|&e| *end = e)));
         let within = |p: &PageSpan| {
             let clusters = &layout.cluster_order[p.first_cluster as usize..][..p.cluster_count as usize];
             let records: Vec<&EncodedCluster> = clusters.iter().map(|&c| &encoded[c]).collect();
@@ -601,25 +593,23 @@ fn page_spans(layout: &Layout, encoded: &[EncodedCluster], kept: Option<&[u32]>,
         }
     }
     let mut ends = Vec::new();
-    let (mut end, mut raw_size) = (0, 0);
-    while end < n {
-        let group_size = size(end);
-        if ends.last().copied().unwrap_or(0) < end && raw_size + group_size > PAGE_TARGET_RAW_SIZE {
-            ends.push(end);
+    let mut raw_size = 0;
+    for (g, &group_size) in sizes.iter().enumerate() {
+        if ends.last().copied().unwrap_or(0) < g && raw_size + group_size > PAGE_TARGET_RAW_SIZE {
+            ends.push(g);
             raw_size = 0;
         }
         raw_size += group_size;
-        end += 1;
     }
     if n > 0 {
         ends.push(n);
     }
-    spans_ending(layout, &size, ends.into_iter())
+    spans_ending(layout, &sizes, ends.into_iter())
 }
 
 /// The pages ending before the groups `ends` (ascending, the last the group count), with
-/// `size(g)` the layout bytes of group `g`.
-fn spans_ending(layout: &Layout, size: &dyn Fn(usize) -> usize, ends: impl Iterator<Item = usize>) -> Vec<PageSpan> {
+/// `sizes[g]` the layout bytes of group `g`.
+fn spans_ending(layout: &Layout, sizes: &[usize], ends: impl Iterator<Item = usize>) -> Vec<PageSpan> {
     let mut start_group = 0;
     ends.map(|end_group| {
         let first_cluster = layout.group_ranges[start_group].0;
@@ -629,7 +619,7 @@ fn spans_ending(layout: &Layout, size: &dyn Fn(usize) -> usize, ends: impl Itera
             cluster_count: last_first + last_count - first_cluster,
             first_group: start_group as u32,
             group_count: (end_group - start_group) as u32,
-            raw_size: (start_group..end_group).map(size).sum(),
+            raw_size: sizes[start_group..end_group].iter().sum(),
         };
         start_group = end_group;
         span
@@ -859,12 +849,21 @@ fn reordered<T: Copy>(values: &[T], order: &[u8]) -> Vec<T> {
     order.iter().map(|&o| values[o as usize]).collect()
 }
 
-/// Whether `q` is in the canonical form: vertices in first-use order, triangles as the index
-/// codec gives them back.
-pub(crate) fn is_canonical(q: &Quantized) -> bool {
+/// What keeps `q` from being values the writer stores (FORMAT.md §4.4), if anything: an
+/// octahedral value over `2^normal_bits − 1`, vertices not in first-use order, or triangles
+/// not as the index codec gives them back.
+pub(crate) fn canonical_fault(q: &Quantized, normal_bits: u32) -> Option<&'static str> {
+    // `normal_bits` is 4..=16 in a file with normals and unchecked in one without (which has
+    // no octahedral values to bound), so the shift is done wide.
+    let most = (1u64 << normal_bits.min(32)) - 1;
+    if q.normals.iter().flatten().any(|&n| n as u64 > most) {
+        return Some("an octahedral value is over 2^normal_bits - 1");
+    }
     let v = q.positions.len();
     let in_order = first_use_order(&q.indices, v).iter().enumerate().all(|(i, &o)| i == o as usize);
-    in_order && codec::canonical_triangles(&q.indices, &q.marks, v) == Some((q.indices.clone(), q.marks.clone()))
+    let stable = codec::canonical_triangles(&q.indices, &q.marks, v) == Some((q.indices.clone(), q.marks.clone()));
+    (!(in_order && stable))
+        .then_some("its vertices are not in first-use order or its triangles not as the index codec gives them back")
 }
 
 /// The GPU-layout header (block offsets left zero) and blocks of a quantized cluster
