@@ -95,13 +95,15 @@ pub fn simplify_measured(
 ) -> Option<Measured> {
     let (members, triangles, errors) = (reference.members_error, &reference.triangles[..], &reference.errors);
     let small = SMALL_TRIANGLE * members as f64;
-    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.owned, small };
+    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.owned, small, members: input };
     // Samples farther than the outlier ratio × the estimate are kept with their distances:
-    // the spots that set an outlier's error are among them (see `Far`).
+    // the spots that set an outlier's error are among them (see `Far`). The measure starts
+    // from the members' error, which the stored error is at least: a query stops at any
+    // triangle within it (the same stored error as from the estimate, for fewer steps).
     let error_of = |s: &Simplified| {
         let record = Some(OUTLIER_RATIO * s.error as f64);
-        let (total, far, found) =
-            measure(mesh, &sides, &s.indices, part_size, s.error as f64, record, reference.original);
+        let floor = s.error.max(members) as f64;
+        let (total, far, found) = measure(mesh, &sides, &s.indices, part_size, floor, record, reference.original);
         (stored(total, s.error).max(members), far, found)
     };
     let mut best = simplify_group(mesh, input, masks, locks, settings, reference.lenient)?;
@@ -157,7 +159,7 @@ pub fn group_error(
     simplifier_error: f32,
 ) -> f32 {
     let errors = vec![members_error; input.len() / 3];
-    let sides = Sides { input, triangle_errors: &errors, owned: None, small: 0.0 };
+    let sides = Sides { input, triangle_errors: &errors, owned: None, small: 0.0, members: input };
     let (total, _, _) = measure(mesh, &sides, output, part_size, simplifier_error as f64, None, None);
     stored(total, simplifier_error).max(members_error)
 }
@@ -173,6 +175,10 @@ struct Sides<'a> {
     /// Upper levels, whose errors dwarf the level-0 triangles, then measure one point per
     /// triangle where its samples are not gathered into balls.
     small: f64,
+    /// The members' triangles (welded ids; `input` itself without `owned`). An output
+    /// triangle among them was measured when its member was made, within that member's error,
+    /// which the stored error is at least: it is not measured again, nor its edges.
+    members: &'a [u32],
 }
 
 /// Largest distance from a triangle's centroid to its corners (so to any of its points).
@@ -313,7 +319,9 @@ fn stored(total: f64, simplifier_error: f32) -> f32 {
 /// With `original` (the whole level-0 surface of this mesh), output samples are measured
 /// against all of it rather than `input`: near the group border the level-0 triangles under the
 /// group (handed down by nearest cluster) need not cover the output exactly, and the distance to
-/// the original surface is what a viewer sees (and what the validator measures).
+/// the original surface is what a viewer sees (and what the validator measures). There the
+/// output triangles the members had (`Sides::members`), and their edges, are not measured:
+/// they were, when they were made, within an error the stored one is at least.
 #[allow(clippy::too_many_arguments)]
 fn measure(
     mesh: &WeldedMesh,
@@ -354,7 +362,8 @@ fn measure(
         indices.par_chunks_exact(3).map(|t| [local(t[0]), local(t[1]), local(t[2])]).collect()
     };
     let output_tris = triangles(output);
-    let (mut input_duty, output_duty) = duties(mesh, input, output, triangle_errors, sides.owned.is_some());
+    let (mut input_duty, output_duty) =
+        duties(mesh, (input, sides.members), output, triangle_errors, sides.owned.is_some());
     // Per input entry, a distance added to its samples': a ball's radius (measured at its
     // centre, see `crate::samples`).
     let mut reach_of = vec![0.0f32; input_tris.len()];
@@ -825,10 +834,11 @@ fn padded(r2: f32) -> f32 {
 /// (`triangle_errors`, per input triangle).
 ///
 /// With `level0_samples` (the input is level-0 triangles whose samples the caller keeps only
-/// where owned), every input sample is measured but the corners the output kept; see below.
+/// where owned), every input sample is measured but the corners the output kept, and every
+/// output triangle but those among the `members`' triangles (and the edges of those); see below.
 fn duties(
     mesh: &WeldedMesh,
-    input: &[u32],
+    (input, members): (&[u32], &[u32]),
     output: &[u32],
     triangle_errors: &[f32],
     level0_samples: bool,
@@ -842,16 +852,15 @@ fn duties(
         e.sort_unstable();
         e
     };
+    // A triangle's key: its position ids, sorted.
+    let key = |c: &[u32]| {
+        let mut k = [id(c[0]), id(c[1]), id(c[2])];
+        k.sort_unstable();
+        k
+    };
     let triangles = |indices: &[u32]| -> Vec<([u32; 3], u32)> {
-        let mut keys: Vec<([u32; 3], u32)> = indices
-            .chunks_exact(3)
-            .enumerate()
-            .map(|(t, c)| {
-                let mut k = [id(c[0]), id(c[1]), id(c[2])];
-                k.sort_unstable();
-                (k, t as u32)
-            })
-            .collect();
+        let mut keys: Vec<([u32; 3], u32)> =
+            indices.chunks_exact(3).enumerate().map(|(t, c)| (key(c), t as u32)).collect();
         keys.sort_unstable();
         keys
     };
@@ -900,8 +909,19 @@ fn duties(
             .with_min_len(4096)
             .map(|t| (0..3).filter(|&k| is_kept(t[k])).fold(0x7fu8, |d, k| d & !(1 << k)))
             .collect();
-        let mut output_duty = vec![64u8; output.len() / 3];
-        mark(&edges(output), &[], &mut output_duty, |_| 0.0, edge);
+        // An output triangle the members had was measured when it was made (within its
+        // member's error, which the stored error is at least), and its edges with it. The
+        // members' triangles by key in a hash set: sorting them cost as much as the queries
+        // it spared at the lower levels.
+        let had: rustc_hash::FxHashSet<[u32; 3]> = members.chunks_exact(3).map(key).collect();
+        let unchanged: Vec<bool> = output.chunks_exact(3).map(|t| had.contains(&key(t))).collect();
+        let mut output_duty: Vec<u8> = unchanged.iter().map(|&u| if u { 0 } else { 64 }).collect();
+        for run in edges(output).chunk_by(|x, y| x.0 == y.0) {
+            if !run.iter().any(|x| unchanged[x.1 as usize / 3]) {
+                let (t, m) = edge(run[0].1);
+                output_duty[t] |= m;
+            }
+        }
         return (input_duty, output_duty);
     }
     let (input_edges, output_edges) = (edges(input), edges(output));
@@ -950,7 +970,8 @@ mod tests {
         let [Owned { samples: Samples::Ball(ball), .. }] = &balls[..] else { panic!("one ball: {balls:?}") };
         let corners: Vec<u32> = balls.iter().flat_map(|o| o.corners()).collect();
         let errors = vec![0.0; balls.len()];
-        let sides = Sides { input: &corners, triangle_errors: &errors, owned: Some(&balls), small: 0.0 };
+        let sides =
+            Sides { input: &corners, triangle_errors: &errors, owned: Some(&balls), small: 0.0, members: &input };
         let original = Original::new(&w, &crate::partition::triangle_order(&w));
         // The peak is `h` above the flat output; the ball is measured at its centre only.
         let (worst, _, found) = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original));
@@ -1026,13 +1047,48 @@ mod tests {
     }
 
     #[test]
+    fn output_triangles_the_members_had_are_not_measured_again() {
+        let (w, input, _) = tent(0.25);
+        let id = |v: u32| w.position_ids[v as usize];
+        // The fan's first two triangles kept, and a new one joining the second's far corner to
+        // the first corner: only its centroid and its new edge (corner 1 to 2) are measured.
+        let corner = |t: usize, k: usize| input[3 * t + k];
+        let (apex, a, c) = (corner(0, 2), corner(0, 0), corner(1, 1));
+        assert_eq!([id(corner(1, 2)), id(corner(0, 1))], [id(apex), id(corner(1, 0))]);
+        let mut output = input[..6].to_vec();
+        output.extend([apex, c, a]);
+        let errors = vec![0.0; input.len() / 3];
+        let (_, duty) = duties(&w, (&input, &input), &output, &errors, true);
+        assert_eq!(duty, vec![0, 0, CENTROID | 16]);
+    }
+
+    #[test]
+    fn the_starting_bound_only_decides_where_queries_stop() {
+        let (w, output) = bumpy(8);
+        let sizes = part_sizes(&w);
+        let original = Original::new(&w, &crate::partition::triangle_order(&w));
+        let input = w.indices.clone();
+        let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
+        let errors = vec![0.0; owned.len()];
+        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), small: 0.0, members: &input };
+        let total = |floor: f64| measure(&w, &sides, &output, &sizes, floor, None, Some(&original)).0;
+        // A group stores at least its members' error: measuring from it gives the same value.
+        let exact = total(0.0);
+        assert!(exact > 0.1, "{exact}");
+        for floor in [0.25 * exact, 0.9 * exact] {
+            assert_eq!(total(floor), exact);
+        }
+        assert_eq!(total(2.0 * exact), 2.0 * exact);
+    }
+
+    #[test]
     fn far_samples_name_the_spot_that_sets_the_error() {
         let (w, input, output) = tent(0.25);
         let sizes = part_sizes(&w);
         let id = |v: u32| w.position_ids[v as usize];
         let peak = (0..w.positions.len() as u32).find(|&v| w.positions[v as usize][2] > 0.0).unwrap();
         let errors = vec![0.0; input.len() / 3];
-        let sides = Sides { input: &input, triangle_errors: &errors, owned: None, small: 0.0 };
+        let sides = Sides { input: &input, triangle_errors: &errors, owned: None, small: 0.0, members: &input };
         let (worst, far, _) = measure(&w, &sides, &output, &sizes, 0.0, Some(0.1), None);
         // The peak (0.25 above the output) was found beyond the bound, so it is recorded; the
         // hot positions are the peak's and those of every input triangle using it (all four).

@@ -19,7 +19,7 @@ use std::time::Instant;
 
 /// Bumped whenever the baker's output for the same input and settings would change; part of
 /// every cache key.
-pub const BAKER_VERSION: u32 = 4;
+pub const BAKER_VERSION: u32 = 5;
 
 /// What happened to one asset.
 #[derive(Clone, Debug, Serialize)]
