@@ -911,8 +911,7 @@ fn duties(
             .collect();
         // An output triangle the members had was measured when it was made (within its
         // member's error, which the stored error is at least), and its edges with it. The
-        // members' triangles by key in a hash set: sorting them cost as much as the queries
-        // it spared at the lower levels.
+        // members' triangles by key in a hash set: one pass, no sort of their keys.
         let had: rustc_hash::FxHashSet<[u32; 3]> = members.chunks_exact(3).map(key).collect();
         let unchanged: Vec<bool> = output.chunks_exact(3).map(|t| had.contains(&key(t))).collect();
         let mut output_duty: Vec<u8> = unchanged.iter().map(|&u| if u { 0 } else { 64 }).collect();
