@@ -8,6 +8,7 @@
 use crate::error::BakeError;
 use crate::weld::{GridMesh, WeldedMesh};
 use mres_format::{Grid, Sphere, UvQuant, NO_GROUP};
+use rayon::prelude::*;
 
 /// One group of the DAG.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -45,12 +46,76 @@ pub struct BuiltCluster {
 /// build frees each shard's mesh once its clusters are handed over, so what the output keeps
 /// sets the build's memory. Group ids in a batch are local to it until [`DagOutput::append`].
 pub trait DagOutput: Sync {
-    /// One mesh's finished clusters, converted.
-    type Clusters: Send;
-    /// Converts `clusters` (each with its group set) of `mesh`; called from any thread.
-    fn convert(&self, mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Result<Self::Clusters, BakeError>;
+    /// One finished cluster, converted.
+    type Cluster: Send;
+    /// Converts `cluster` (with its group set) of `mesh`, cluster `index` of its level loop
+    /// (for errors); called from any thread, while the loop goes on (see `Converted`).
+    fn convert(&self, mesh: &WeldedMesh, cluster: &BuiltCluster, index: usize) -> Result<Self::Cluster, BakeError>;
     /// Takes a converted batch in, mapping its group ids to the DAG's with `global`.
-    fn append(&mut self, clusters: Self::Clusters, global: &dyn Fn(u32) -> u32);
+    fn append(&mut self, clusters: Vec<Self::Cluster>, global: &dyn Fn(u32) -> u32);
+}
+
+/// The clusters of one level loop converted by a [`DagOutput`] as they are finished. A
+/// cluster is finished once its group is formed; the loop hands each level's newly grouped
+/// clusters over beside the next level's partition, whose METIS calls run on one thread
+/// (`levels::Builder::step_beside`), so the conversion fills a core that would wait instead
+/// of running after the last level. The rest are converted at the end ([`Converted::take`]).
+pub(crate) struct Converted<C> {
+    /// Per cluster index of the loop, its conversion where done.
+    by_cluster: Vec<Option<C>>,
+    /// The first conversion that failed, in the order they were handed over.
+    error: Option<BakeError>,
+}
+
+impl<C: Send> Converted<C> {
+    pub fn new() -> Self {
+        Converted { by_cluster: Vec::new(), error: None }
+    }
+
+    /// Converts the clusters `batch` (indices into `clusters`, each grouped) of `mesh`, in
+    /// parallel.
+    pub fn convert<O: DagOutput<Cluster = C>>(
+        &mut self,
+        output: &O,
+        mesh: &WeldedMesh,
+        clusters: &[BuiltCluster],
+        batch: &[usize],
+    ) {
+        let results: Vec<Result<C, BakeError>> =
+            batch.par_iter().map(|&c| output.convert(mesh, &clusters[c], c)).collect();
+        if let Some(&last) = batch.iter().max() {
+            if self.by_cluster.len() <= last {
+                self.by_cluster.resize_with(last + 1, || None);
+            }
+        }
+        for (&c, result) in batch.iter().zip(results) {
+            match result {
+                Ok(converted) => self.by_cluster[c] = Some(converted),
+                Err(e) => {
+                    self.error.get_or_insert(e);
+                }
+            }
+        }
+    }
+
+    /// The clusters `finished` (ascending indices into `clusters`) converted, in that order:
+    /// those converted already, and the rest now; the first error of any conversion.
+    pub fn take<O: DagOutput<Cluster = C>>(
+        mut self,
+        output: &O,
+        mesh: &WeldedMesh,
+        clusters: &[BuiltCluster],
+        finished: &[usize],
+    ) -> Result<Vec<C>, BakeError> {
+        let missing: Vec<usize> =
+            finished.iter().copied().filter(|&c| self.by_cluster.get(c).is_none_or(Option::is_none)).collect();
+        self.convert(output, mesh, clusters, &missing);
+        if let Some(e) = self.error {
+            return Err(e);
+        }
+        let mut by_cluster = self.by_cluster;
+        Ok(finished.iter().map(|&c| by_cluster[c].take().expect("converted above")).collect())
+    }
 }
 
 /// Quantization and attributes shared by every cluster of a DAG.
@@ -188,7 +253,7 @@ pub(crate) struct Cell<C> {
     /// New groups; the group `LOCAL | i` is `groups[i]`.
     pub groups: Vec<BuiltGroup>,
     /// Finished clusters, converted by the output.
-    pub finished: C,
+    pub finished: Vec<C>,
     /// Clusters without a group yet.
     pub top: Vec<TopCluster>,
     /// The level the next groups get.
@@ -217,7 +282,7 @@ impl<O: DagOutput> Collected<O> {
 
     /// Takes the cells in order, giving their local groups global ids; returns their top
     /// clusters.
-    pub fn collect(&mut self, cells: Vec<Cell<O::Clusters>>, stats: &mut BuildStats) -> Vec<TopCluster> {
+    pub fn collect(&mut self, cells: Vec<Cell<O::Cluster>>, stats: &mut BuildStats) -> Vec<TopCluster> {
         let mut top = Vec::new();
         for cell in cells {
             let offset = self.groups.len() as u32;

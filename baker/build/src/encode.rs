@@ -8,7 +8,6 @@ use crate::settings::{BakeSettings, PageEncoding};
 use crate::weld::WeldedMesh;
 use mres_format::write::{write_encoded_with, EncodedCluster, PageCoding};
 use mres_format::{DagCluster, Group, Header, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS};
-use rayon::prelude::*;
 
 /// A [`DagOutput`] that encodes clusters for the `.mres` writer.
 pub struct Encoder {
@@ -57,15 +56,11 @@ impl Encoder {
 }
 
 impl DagOutput for Encoder {
-    type Clusters = Vec<EncodedCluster>;
+    type Cluster = EncodedCluster;
 
-    fn convert(&self, mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Result<Vec<EncodedCluster>, BakeError> {
+    fn convert(&self, mesh: &WeldedMesh, cluster: &BuiltCluster, index: usize) -> Result<EncodedCluster, BakeError> {
         let header = self.header(&Frame::of(mesh), 0);
-        clusters
-            .par_iter()
-            .enumerate()
-            .map(|(i, c)| Ok(EncodedCluster::new(&dag_cluster(mesh, c), &header, i)?))
-            .collect()
+        Ok(EncodedCluster::new(&dag_cluster(mesh, cluster), &header, index)?)
     }
 
     fn append(&mut self, clusters: Vec<EncodedCluster>, global: &dyn Fn(u32) -> u32) {

@@ -7,7 +7,7 @@
 
 use crate::chords::{self, Chords};
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
-use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, DagOutput, TopCluster, LOCAL};
+use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, Converted, DagOutput, TopCluster, LOCAL};
 use crate::deviation::{part_sizes, simplify_measured, Original, Reference};
 use crate::error::BakeError;
 use crate::open;
@@ -177,6 +177,8 @@ pub(crate) struct Builder<'a> {
     pub stats: BuildStats,
     /// The first level's groups where the caller made them ([`Prepared::parts`]).
     parts: Option<Vec<Vec<u32>>>,
+    /// Clusters grouped since they were last handed over to be converted (see [`Converted`]).
+    grouped: Vec<usize>,
 }
 
 /// What a caller of [`Builder::with_prepared`] made beforehand, side by side with the level-0
@@ -239,6 +241,7 @@ impl<'a> Builder<'a> {
             level,
             stats,
             parts,
+            grouped: Vec::new(),
         }
     }
 
@@ -247,18 +250,30 @@ impl<'a> Builder<'a> {
         self.pending.iter().map(|&c| self.clusters[c].indices.len() / 3).sum()
     }
 
-    /// Builds one level. Returns false (and changes nothing) when there is nothing left to
-    /// group, and false after a level where no group could be simplified.
-    pub fn step(&mut self, progress: Progress) -> bool {
+    /// Builds one level, handing the clusters grouped since the last call to `output` to be
+    /// converted into `converted` beside the level's partition (see [`Converted`]). Returns
+    /// false (and changes nothing) when there is nothing left to group, and false after a
+    /// level where no group could be simplified.
+    pub fn step<O: DagOutput>(
+        &mut self,
+        progress: Progress,
+        output: &O,
+        converted: &mut Converted<O::Cluster>,
+    ) -> bool {
         if self.pending.len() <= 1 || self.level >= MAX_LEVELS {
             return false;
         }
-        let clusters = &self.clusters;
+        let (mesh, clusters) = (self.mesh, &self.clusters);
         let pending = || self.pending.iter().map(|&c| &clusters[c]);
         let refs: Vec<&[u32]> = pending().map(|c| c.indices.as_slice()).collect();
+        let grouped = std::mem::take(&mut self.grouped);
+        let mut convert = || converted.convert(output, mesh, clusters, &grouped);
         let mut parts = match self.parts.take() {
-            Some(parts) => parts,
-            None => groups(self.mesh, pending(), self.settings),
+            Some(parts) => {
+                convert();
+                parts
+            }
+            None => rayon::join(|| groups(mesh, pending(), self.settings), convert).0,
         };
         let mut results = self.simplify_parts(&parts, &refs, NON_MANIFOLD);
         if results.iter().all(Option::is_none) {
@@ -411,6 +426,7 @@ impl<'a> Builder<'a> {
                 clusters[c].group = id;
                 clusters[c].owned = Vec::new();
             }
+            self.grouped.extend_from_slice(&members);
             for Child { indices, open, owned } in children {
                 next.push(clusters.len());
                 let (own_sphere, own_error, group) = (sphere, error, NO_GROUP);
@@ -451,24 +467,32 @@ impl<'a> Builder<'a> {
     }
 
     /// Builds levels until nothing is left to group, then makes the root group(s).
-    pub fn build_to_root(&mut self, progress: Progress) {
-        while self.step(progress) {}
+    pub fn build_to_root<O: DagOutput>(
+        &mut self,
+        progress: Progress,
+        output: &O,
+        converted: &mut Converted<O::Cluster>,
+    ) {
+        while self.step(progress, output, converted) {}
         self.make_roots();
     }
 
     /// Hands the clusters that got a group to `output` (in creation order) and keeps the
     /// pending ones as top clusters, on the grid.
-    pub fn finish<O: DagOutput>(self, output: &O) -> Result<Cell<O::Clusters>, BakeError> {
+    pub fn finish<O: DagOutput>(
+        self,
+        output: &O,
+        converted: Converted<O::Cluster>,
+    ) -> Result<Cell<O::Cluster>, BakeError> {
         let mut is_top = vec![false; self.clusters.len()];
         for &c in &self.pending {
             is_top[c] = true;
         }
         let top = self.pending.iter().map(|&c| TopCluster::new(self.mesh, &self.clusters[c])).collect();
-        let finished: Vec<BuiltCluster> =
-            self.clusters.into_iter().zip(is_top).filter(|(_, top)| !top).map(|(c, _)| c).collect();
+        let finished: Vec<usize> = (0..self.clusters.len()).filter(|&c| !is_top[c]).collect();
         Ok(Cell {
             groups: self.groups,
-            finished: output.convert(self.mesh, &finished)?,
+            finished: converted.take(output, self.mesh, &self.clusters, &finished)?,
             top,
             levels: self.level,
             stats: self.stats,

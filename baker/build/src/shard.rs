@@ -27,7 +27,9 @@
 //! mesh's build. Output is deterministic: cells, spill order and shard results depend only on
 //! the input and the settings, never on the thread count.
 
-use crate::dag::{BuildStats, BuiltCluster, BuiltDag, Cell, Collected, DagOutput, Frame, StageClock, TopCluster};
+use crate::dag::{
+    BuildStats, BuiltCluster, BuiltDag, Cell, Collected, Converted, DagOutput, Frame, StageClock, TopCluster,
+};
 use crate::error::BakeError;
 use crate::levels::{level0, Builder, Level0Edges};
 use crate::partition::numbered_in_triangle_order;
@@ -327,7 +329,7 @@ impl ShardContext<'_> {
         count: usize,
         output: &O,
         progress: Progress,
-    ) -> Result<Vec<Cell<O::Clusters>>, BakeError> {
+    ) -> Result<Vec<Cell<O::Cluster>>, BakeError> {
         (0..count)
             .into_par_iter()
             .map(|s| {
@@ -350,7 +352,7 @@ impl ShardContext<'_> {
         spill: &Path,
         global_open: &FxHashSet<u128>,
         output: &O,
-    ) -> Result<Cell<O::Clusters>, BakeError> {
+    ) -> Result<Cell<O::Cluster>, BakeError> {
         let records = Spill::read(spill)?;
         let mesh = self.shard_mesh(source, &records);
         drop(records);
@@ -425,7 +427,7 @@ impl ShardContext<'_> {
             let cell_tops: Vec<Vec<TopCluster>> =
                 cells.iter().map(|ids| ids.iter().filter_map(|&i| slots[i].take()).collect()).collect();
             let (level, output) = (dag.level, &dag.output);
-            let results: Vec<Cell<O::Clusters>> = cell_tops
+            let results: Vec<Cell<O::Cluster>> = cell_tops
                 .into_par_iter()
                 .map(|tops| self.build_cell(tops, level, false, output))
                 .collect::<Result<_, _>>()?;
@@ -444,7 +446,7 @@ impl ShardContext<'_> {
         level: u32,
         to_root: bool,
         output: &O,
-    ) -> Result<Cell<O::Clusters>, BakeError> {
+    ) -> Result<Cell<O::Cluster>, BakeError> {
         let (merged, clusters) = self.merge(tops);
         self.levels(&merged, clusters, level, to_root, output)
     }
@@ -457,17 +459,18 @@ impl ShardContext<'_> {
         level: u32,
         to_root: bool,
         output: &O,
-    ) -> Result<Cell<O::Clusters>, BakeError> {
+    ) -> Result<Cell<O::Cluster>, BakeError> {
         let quiet: Progress = &|_| {};
         let mut builder = Builder::new(welded, self.settings, clusters, level);
+        let mut converted = Converted::new();
         if to_root {
-            builder.build_to_root(quiet);
+            builder.build_to_root(quiet, output, &mut converted);
         } else {
             loop {
                 let before = builder.pending_triangles() as f64;
                 if builder.level >= level + LEVELS_PER_STAGE
                     || builder.pending.len() <= 4 * self.settings.group_size as usize
-                    || !builder.step(quiet)
+                    || !builder.step(quiet, output, &mut converted)
                 {
                     break;
                 }
@@ -476,7 +479,7 @@ impl ShardContext<'_> {
                 }
             }
         }
-        builder.finish(output)
+        builder.finish(output, converted)
     }
 
     /// The top clusters as one mesh, welded by their grid points (so shard borders meet), and

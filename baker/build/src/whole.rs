@@ -1,7 +1,7 @@
 //! A mesh of at most `shard_triangles` triangles is built whole: welded on a grid over its
 //! bounds, cut into level-0 clusters, and built level by level to the root.
 
-use crate::dag::{BuildStats, BuiltDag, Collected, DagOutput, Frame, StageClock};
+use crate::dag::{BuildStats, BuiltDag, Collected, Converted, DagOutput, Frame, StageClock};
 use crate::deviation::{part_sizes, Original};
 use crate::error::BakeError;
 use crate::levels::{groups, level0, Builder, Level0Edges, Prepared};
@@ -50,10 +50,11 @@ pub fn build_whole<O: DagOutput>(
     drop(edges);
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
-    builder.build_to_root(progress);
+    let mut converted = Converted::new();
+    builder.build_to_root(progress, &output, &mut converted);
     clock.lap(&mut stats, "levels");
+    let cell = builder.finish(&output, converted)?;
     let mut dag = Collected::new(output);
-    let cell = builder.finish(&dag.output)?;
     dag.collect(vec![cell], &mut stats);
     dag.welded_vertices = welded.positions.len() as u64;
     dag.degenerate = welded.degenerate_dropped;
