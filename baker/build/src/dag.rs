@@ -58,7 +58,7 @@ pub trait DagOutput: Sync {
 /// The clusters of one level loop converted by a [`DagOutput`] as they are finished. A
 /// cluster is finished once its group is formed; the loop hands each level's newly grouped
 /// clusters over beside the next level's partition, whose METIS calls run on one thread
-/// (`levels::Builder::step_beside`), so the conversion fills a core that would wait instead
+/// (`levels::Builder::step`), so the conversion fills a core that would wait instead
 /// of running after the last level. The rest are converted at the end ([`Converted::take`]).
 pub(crate) struct Converted<C> {
     /// Per cluster index of the loop, its conversion where done.
