@@ -14,6 +14,7 @@
 //! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
 //! with their worst spots locked ([`simplify_measured`]).
 
+use crate::patches::{accept_patches, Box3};
 use crate::samples::{sample_point, set_bits, Owned, Samples, CENTROID, NOT_FOUND};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Locks, Simplified};
@@ -21,7 +22,7 @@ use crate::weld::WeldedMesh;
 use mres_geom::bvh::{Bvh, Triangle};
 use mres_geom::edges::edge_key;
 use mres_geom::parts::{diagonals, UnionFind};
-use mres_geom::walk::Surface;
+use mres_geom::walk::{Surface, STEPS};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
@@ -209,10 +210,6 @@ pub struct Original {
     slack: f64,
 }
 
-/// Most steps of a walk on the original surface before the hierarchy takes over: output samples
-/// lie a few level-0 triangles from the previous one at the lower levels, where most queries are.
-const WALK_STEPS: usize = 8;
-
 impl Original {
     /// The level-0 triangles of `mesh` (its `indices`), in `order` (the mesh's
     /// [`crate::partition::triangle_order`], which the level-0 clusters share).
@@ -268,7 +265,7 @@ impl Original {
                 // 3 + k, at corner k; the centroid at corner 0), then the hierarchy from the
                 // closer end (a corner can be far: the apex of a fan of slivers).
                 let corner = || self.at_position[id(t[b.saturating_sub(3) % 3]) as usize] as usize;
-                let (d2, nearest) = self.surface.within_squared2(p, enough, hint, corner, WALK_STEPS);
+                let (d2, nearest) = self.surface.within_squared2(p, enough, hint, corner, STEPS);
                 hint = nearest;
                 if d2 > enough {
                     worst = worst.max(SAMPLING_MARGIN * ((d2 as f64).sqrt() + self.slack));
@@ -578,7 +575,7 @@ impl InputSide<'_> {
                 let e = self.errors[i] + self.reach[i];
                 for b in set_bits(self.duty[i] & pass) {
                     let enough = limits.enough2(worst, e as f64);
-                    let (d2, nearest) = output.nearest_squared(sample_point(tri, b), enough, hint, WALK_STEPS);
+                    let (d2, nearest) = output.nearest_squared(sample_point(tri, b), enough, hint, STEPS);
                     hint = nearest;
                     if self.reach[i] > 0.0 {
                         // A ball, measured at its centre.
@@ -601,229 +598,6 @@ impl InputSide<'_> {
         }
         (worst, far)
     }
-}
-
-/// Input → output, a patch at a time: where a sphere around several input entries (level-0
-/// triangles, or balls grown by their `reach`: see [`crate::samples`]) lies so
-/// close to the output that no point in it can raise the error, one query at its centre
-/// settles all of their samples. Distance to a surface is 1-Lipschitz, so every point within
-/// `R` of the centre is within `d + R` of the output; a patch is settled when `d + R` is below
-/// `bound(e)` (the distance under which a sample of member error `e` cannot raise the current
-/// maximum). Its triangles' duties are cleared and their measured samples `found` at the
-/// triangle the centre's query stopped at, within the bound of each of them (a corner the
-/// output kept stays unfound: the hand-down gives it to a cluster using it, which keeps the
-/// next level's errors tight). Patches are runs of `input`
-/// (in Morton order, see [`Owned`]), halved until they settle or hold one triangle; what is left is
-/// measured sample by sample. At upper levels, whose errors dwarf the level-0 triangles, this
-/// replaces most of the three queries per level-0 triangle by one per patch. At the lower
-/// levels, where hardly an entry is small enough to settle (see [`FEW_SMALL`]), it does
-/// nothing: building and walking the pyramid there cost more than the queries it spared.
-fn accept_patches(
-    (input, reach): (&[Triangle<f32>], &[f32]),
-    (duty, found): (&mut [u8], &mut [u32]),
-    output: &Surface<f32>,
-    triangle_errors: &[f32],
-    bound: impl Fn(f32) -> f32 + Sync,
-) {
-    if input.is_empty() {
-        return;
-    }
-    // A patch settles only if each of its entries' boxes is as small as it must be, for the
-    // smallest member error: count those (an upper bound on what patches can settle) among
-    // the entries to measure (those with a box), before building anything (at the lower
-    // levels hardly any is).
-    let half = 0.5 * bound(0.0);
-    let count = |b: Box3| half_diagonal(&b).map_or((0, 0), |r| (1, usize::from(r < half)));
-    let entries = || input.par_iter().zip(&duty[..]).zip(reach).with_min_len(4096);
-    let (measured, small) = entries().map(|e| count(leaf(e))).reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    if small * FEW_SMALL < measured {
-        return;
-    }
-    let boxes = BoxPyramid::new(entries().map(leaf).collect(), triangle_errors);
-    let patches = Patches { boxes: &boxes, output, bound: &bound };
-    // The patches above runs of 2^PATCH_RUN entries first, then each such run left unsettled
-    // on its own, side by side (a group's runs are many only at the top levels, where one group
-    // holds every level-0 triangle); the same for any thread count.
-    let top = boxes.levels.len() - 1;
-    if top <= PATCH_RUN {
-        patches.settle((top, 0), 0, (duty, found), 0, |_| {});
-        return;
-    }
-    let mut open = vec![false; input.len().div_ceil(1 << PATCH_RUN)];
-    patches.settle((top, 0), PATCH_RUN, (duty, found), 0, |k| open[k] = true);
-    let runs = duty.par_chunks_mut(1 << PATCH_RUN).zip(found.par_chunks_mut(7 << PATCH_RUN));
-    runs.enumerate().filter(|(k, _)| open[*k]).for_each(|(k, (duty, found))| {
-        patches.settle((PATCH_RUN, k), 0, (duty, found), k << PATCH_RUN, |_| {});
-    });
-}
-
-/// Entries of a run whose patches [`accept_patches`] tries on its own: 2^12, as
-/// `RUN_TRIANGLES`.
-const PATCH_RUN: usize = 12;
-
-/// [`accept_patches`] tries no patch where fewer than one in this many of the entries to
-/// measure could settle at all: it would spare at most that share of the queries. Measured on
-/// the Stanford dragon (one thread): its first five levels settle 1-6 % of their entries by
-/// patches, and skipping them there saves 2-3 % of the bake; see docs/BENCHMARKS.md.
-const FEW_SMALL: usize = 8;
-
-/// What [`accept_patches`] settles patches with.
-struct Patches<'a, F> {
-    boxes: &'a BoxPyramid,
-    output: &'a Surface<f32>,
-    bound: &'a F,
-}
-
-impl<F: Fn(f32) -> f32> Patches<'_, F> {
-    /// Settles what it can of the subtree of pyramid node `root` (level, index), down to
-    /// level `floor`, whose unsettled nodes go to `open` (by index); `duty` and `found` are
-    /// the entries' from entry `first` on.
-    fn settle(
-        &self,
-        root: (usize, usize),
-        floor: usize,
-        (duty, found): (&mut [u8], &mut [u32]),
-        first: usize,
-        mut open: impl FnMut(usize),
-    ) {
-        let boxes = self.boxes;
-        let mut hint = usize::MAX;
-        let mut stack = vec![root];
-        // Most nodes share their error (level-0 entries have none): the bound is computed anew
-        // only where it changes.
-        let (mut error, mut limit) = (f32::NAN, 0.0);
-        while let Some((level, k)) = stack.pop() {
-            let b = &boxes.levels[level][k];
-            let Some(r2) = half_diagonal2(b) else { continue };
-            if boxes.errors[level][k].to_bits() != error.to_bits() {
-                error = boxes.errors[level][k];
-                limit = (self.bound)(error);
-            }
-            // Far too large to settle: no root to take (the upper levels of a large group).
-            let too_large = r2 > 0.25 * limit * limit * (1.0 + 1e-4);
-            let radius = if too_large { f32::INFINITY } else { padded(r2) };
-            if radius < 0.5 * limit {
-                let center = centre(b);
-                let enough = (limit - radius) * (limit - radius);
-                let (d2, nearest) = self.output.nearest_squared(center, enough, hint, WALK_STEPS);
-                hint = nearest;
-                if d2 <= enough {
-                    let run = (k << level) - first..((k + 1) << level).min(first + duty.len()) - first;
-                    for i in run {
-                        for b in set_bits(duty[i]) {
-                            found[7 * i + b] = nearest as u32;
-                        }
-                        duty[i] = 0;
-                    }
-                    continue;
-                }
-            }
-            if level == floor {
-                open(k);
-            } else {
-                let children = [(level - 1, 2 * k + 1), (level - 1, 2 * k)];
-                stack.extend(children.into_iter().filter(|&(l, c)| c < boxes.levels[l].len()));
-            }
-        }
-    }
-}
-
-/// The pyramid's level 0 for one entry: the box of a triangle grown by its `reach` (see
-/// `InputSide::reach`); one whose duty is 0 has nothing to measure and gets an empty box.
-fn leaf(((t, &duty), &reach): ((&Triangle<f32>, &u8), &f32)) -> Box3 {
-    if duty == 0 {
-        return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-    }
-    let lo = [0, 1, 2].map(|k| lesser(lesser(t[0][k], t[1][k]), t[2][k]) - reach);
-    let hi = [0, 1, 2].map(|k| greater(greater(t[0][k], t[1][k]), t[2][k]) + reach);
-    (lo, hi)
-}
-
-/// Bounding boxes of runs of triangles: level 0 one per triangle, level j + 1 the union of
-/// pairs of level j (runs of 2^j triangles), up to one box for all. Built in linear time, so
-/// that trying patches costs little where none settles.
-struct BoxPyramid {
-    levels: Vec<Vec<Box3>>,
-    /// The same pyramid of the runs' largest triangle errors (a patch's bound needs it: one
-    /// lookup, not a pass over the run).
-    errors: Vec<Vec<f32>>,
-}
-
-impl BoxPyramid {
-    /// The pyramid over `leaves` (see [`leaf`]), with their entries' `errors`.
-    fn new(leaves: Vec<Box3>, errors: &[f32]) -> BoxPyramid {
-        let mut levels = vec![leaves];
-        while levels[levels.len() - 1].len() > 1 {
-            let union = |p: &[Box3]| {
-                let (mut lo, mut hi) = p[0];
-                for b in &p[1..] {
-                    for k in 0..3 {
-                        (lo[k], hi[k]) = (lesser(lo[k], b.0[k]), greater(hi[k], b.1[k]));
-                    }
-                }
-                (lo, hi)
-            };
-            let next = levels[levels.len() - 1].par_chunks(2).with_min_len(2048).map(union).collect();
-            levels.push(next);
-        }
-        let mut error_levels = vec![errors.to_vec()];
-        while error_levels.len() < levels.len() {
-            let largest = |p: &[f32]| p.iter().copied().fold(0.0, f32::max);
-            let next = error_levels[error_levels.len() - 1].par_chunks(2).with_min_len(2048).map(largest).collect();
-            error_levels.push(next);
-        }
-        BoxPyramid { levels, errors: error_levels }
-    }
-}
-
-/// An axis-aligned box: lower and upper corner.
-type Box3 = ([f32; 3], [f32; 3]);
-
-/// Comparisons rather than `min`/`max` (their NaN rules cost instructions on every triangle):
-/// on finite values the same bounds, up to the sign of a zero, which neither a centre's query
-/// nor a radius sees.
-fn lesser(a: f32, b: f32) -> f32 {
-    if b < a {
-        b
-    } else {
-        a
-    }
-}
-
-/// See [`lesser`].
-fn greater(a: f32, b: f32) -> f32 {
-    if b > a {
-        b
-    } else {
-        a
-    }
-}
-
-/// The centre of box `b`.
-fn centre((lo, hi): &Box3) -> [f32; 3] {
-    [0, 1, 2].map(|k| lo[k] * 0.5 + hi[k] * 0.5)
-}
-
-/// Half the diagonal of box `b`, padded for rounding (every point in it is within that of its
-/// [`centre`]); `None` for an empty box.
-fn half_diagonal(b: &Box3) -> Option<f32> {
-    half_diagonal2(b).map(padded)
-}
-
-/// The square of half the diagonal of box `b` (from its [`centre`]), unpadded; `None` for an
-/// empty box.
-fn half_diagonal2(b: &Box3) -> Option<f32> {
-    let (lo, hi) = b;
-    if lo[0] > hi[0] {
-        return None;
-    }
-    let c = centre(b);
-    Some((0..3).map(|k| (hi[k] - c[k]).max(c[k] - lo[k])).map(|d| d * d).sum())
-}
-
-/// [`half_diagonal`] from its square.
-fn padded(r2: f32) -> f32 {
-    r2.sqrt() * (1.0 + 1e-5)
 }
 
 /// Which samples each triangle of `input` and of `output` measures, as bits: corner k (bit k;

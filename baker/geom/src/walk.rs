@@ -19,6 +19,12 @@ use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 /// No triangle across this edge: an open border, or an edge with more than two triangles.
 const NONE: u32 = u32::MAX;
 
+/// Most steps of a walk before a query is left to the hierarchy, for queries in spatial order
+/// (the baker's: each sample lies a few triangles from the previous one's answer at the lower
+/// levels, where most queries are). Walks of 24 or 48 steps made no difference to the bake
+/// (docs/BENCHMARKS.md).
+pub const STEPS: usize = 8;
+
 /// Per triangle, the triangle across each of its edges (edge k from corner k to corner k + 1).
 pub struct Neighbours {
     across: Vec<[u32; 3]>,
