@@ -15,7 +15,7 @@
 //! with their worst spots locked ([`simplify_measured`]).
 
 use crate::patches::{accept_patches, Box3};
-use crate::samples::{sample_point, set_bits, Owned, Samples, CENTROID, NOT_FOUND};
+use crate::samples::{sample_point, set_bits, Owned, Samples, CENTROID, NOT_FOUND, VANISHED};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Locks, Simplified};
 use crate::weld::WeldedMesh;
@@ -144,7 +144,8 @@ pub struct Measured {
     /// Its stored error.
     pub error: f32,
     /// Per reference sample, the output triangle within `error` of it that measuring found
-    /// (`NOT_FOUND` where not measured), for [`crate::samples::assign_owned`].
+    /// (`NOT_FOUND` where not measured, `VANISHED` where its part can raise no error again),
+    /// for [`crate::samples::assign_owned`].
     pub found: Vec<u32>,
 }
 
@@ -537,6 +538,13 @@ impl Limits {
     fn total(&self, d2: f32, e: f64) -> f64 {
         e + SAMPLING_MARGIN * ((d2 as f64).sqrt() + self.slack)
     }
+
+    /// Whether a sample of member error `e` whose part has squared size `size2` (the most its
+    /// distance counts for) can neither raise `worst` nor be recorded as far: it need not be
+    /// measured, here or at any ancestor.
+    fn vanished(&self, size2: f32, e: f64, worst: f64) -> bool {
+        self.total(size2, e) <= worst && self.record2.is_none_or(|h| size2 <= h)
+    }
 }
 
 /// The input side of a measurement, in the group's local coordinates.
@@ -573,6 +581,14 @@ impl InputSide<'_> {
                 let i = first + j;
                 let (t, tri) = (&self.input[3 * i..3 * i + 3], &self.tris[i]);
                 let e = self.errors[i] + self.reach[i];
+                let size = || part_size[id(t[0]) as usize];
+                if self.duty[i] & pass != 0 && limits.vanished(size() * size(), e as f64, worst) {
+                    // Its part's size, the most it can count for, is within the bound already:
+                    // it cannot raise this group's error nor, errors being monotone, any
+                    // ancestor's (measured from level-0 samples, errors 0: nothing adds up).
+                    slots.fill(VANISHED);
+                    continue;
+                }
                 for b in set_bits(self.duty[i] & pass) {
                     let enough = limits.enough2(worst, e as f64);
                     let (d2, nearest) = output.nearest_squared(sample_point(tri, b), enough, hint, STEPS);
@@ -585,7 +601,6 @@ impl InputSide<'_> {
                     }
                     // A point farther than its part's size counts as that: the part vanished
                     // (looked up only beyond `enough`, where the capped value can matter).
-                    let size = || part_size[id(t[0]) as usize];
                     let d2 = if d2 > enough { d2.min(size() * size()) } else { d2 };
                     if d2 > enough {
                         worst = worst.max(limits.total(d2, e as f64));
@@ -874,5 +889,42 @@ mod tests {
         assert!(far.hot(&w, &input, worst).is_empty());
         let (_, none, _) = measure(&w, &sides, &output, &sizes, 0.0, None, None);
         assert!(none.hot(&w, &input, 0.0).is_empty());
+    }
+
+    #[test]
+    fn a_vanished_part_within_the_bound_is_measured_no_more() {
+        // The tent (peak 0.25 above the flat output), then two small triangles far above it,
+        // each its own part, that the output dropped: a (0.07 across) and b (0.57 across).
+        let mut positions = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.5, 0.5, 0.25]];
+        positions.extend([[0.0, 0.0, 3.0], [0.05, 0.0, 3.0], [0.0, 0.05, 3.0]]);
+        positions.extend([[0.0, 0.0, 5.0], [0.4, 0.0, 5.0], [0.0, 0.4, 5.0]]);
+        let indices = vec![0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4, 5, 6, 7, 8, 9, 10];
+        let w = weld(&SourceMesh::positions_only(positions.clone(), indices), &BakeSettings::default()).unwrap();
+        // Welded ids by nearest position (weld snaps to its grid).
+        let d2 = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>();
+        let near = |p: [f32; 3], u: u32| d2(w.positions[u as usize], p);
+        let at =
+            |p: [f32; 3]| (0..w.positions.len() as u32).min_by(|&a, &b| near(p, a).total_cmp(&near(p, b))).unwrap();
+        let input: Vec<u32> =
+            [0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4, 5, 6, 7, 8, 9, 10].map(|v| at(positions[v])).to_vec();
+        let output: Vec<u32> = [0, 1, 2, 0, 2, 3].map(|v| at(positions[v])).to_vec();
+        let sizes = part_sizes(&w);
+        let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
+        let errors = vec![0.0; owned.len()];
+        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), small: 0.0, members: &input };
+        let original = Original::new(&w, &crate::partition::triangle_order(&w));
+        let (worst, _, found) = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original));
+        // a counts for its size at most, 0.07, within the peak's 0.25 by the time its corners
+        // are met: it is marked without a query. b counts for its size, 0.57: its corners are
+        // measured and set the error (so b was not marked before), and then its other samples
+        // are within the bound and it is marked too. Neither is handed down; the tent is.
+        let size = |v: usize| sizes[w.position_ids[at(positions[v]) as usize] as usize] as f64;
+        assert!(size(5) < 0.25 && size(8) > 0.25);
+        assert!(worst >= size(8) && worst < size(8) * 1.001, "{worst} vs b's size {}", size(8));
+        let vanished = |e: usize| found[7 * e..7 * e + 7].contains(&VANISHED);
+        assert!(vanished(4) && vanished(5), "a and b are marked: {:?}", &found[28..]);
+        assert!((0..4).all(|e| !vanished(e)), "the tent is not: {found:?}");
+        let kept = crate::samples::without_vanished(owned.clone(), &found);
+        assert_eq!(kept, &owned[..4]);
     }
 }

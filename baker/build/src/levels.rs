@@ -13,7 +13,7 @@ use crate::error::BakeError;
 use crate::open;
 use crate::partition::{cluster_graph, one_group, partition, triangle_order};
 use crate::progress::Progress;
-use crate::samples::{assign_owned, keep_together, merge_owned, sort_owned, Owned, CENTROID};
+use crate::samples::{assign_owned, keep_together, merge_owned, sort_owned, without_vanished, Owned, CENTROID};
 use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{simplify_group, Locks, Method};
 use crate::weld::WeldedMesh;
@@ -366,6 +366,7 @@ impl<'a> Builder<'a> {
         } else if part.len() == self.pending.len() && one_group(indices.len(), settings.group_size as usize) {
             // The level's only group, whose children will all form the next level's only
             // group: handing its samples down to them only to join them again is spared.
+            let owned = without_vanished(owned, &found);
             keep_together(mesh, owned, s.indices.len() / 3, (error, part_size), indices.len())
         } else {
             assign_owned(mesh, &owned, (&s.indices, &found), &indices, (error, part_size))

@@ -40,6 +40,10 @@ pub const CENTROID: u8 = 1 << 6;
 /// Mark for a sample that was not measured (see [`assign_owned`]).
 pub const NOT_FOUND: u32 = u32::MAX;
 
+/// Mark for a sample of a part so small beside the group's error that it can raise no error
+/// again (see `deviation::InputSide::measure`): its entry is handed to no cluster.
+pub const VANISHED: u32 = u32::MAX - 1;
+
 /// Level-0 samples a cluster stands for, with the Morton code of where they lie over the
 /// mesh: the sort key, so that a group's samples come in spatial order (queries then start
 /// near their answer, runs of them form patches and balls).
@@ -180,8 +184,9 @@ pub fn sample_point(t: &Triangle<f32>, b: usize) -> [f32; 3] {
 /// whole, by its centre. The next level measures the sample against that cluster's group. A
 /// sample must go to a cluster near itself, not just near its triangle: where a group border
 /// later runs between two clusters, a level-0 triangle can straddle it, and its far corner would
-/// be measured across the border. Every sample stays under exactly one pending cluster. Each
-/// cluster's samples are then gathered into balls (see `gather`).
+/// be measured across the border. Every sample stays under exactly one pending cluster, but
+/// those measuring marked [`VANISHED`], which go to none. Each cluster's samples are then
+/// gathered into balls (see `gather`).
 pub fn assign_owned(
     mesh: &WeldedMesh,
     owned: &[Owned],
@@ -285,6 +290,9 @@ fn hand_down(mesh: &WeldedMesh, owned: &[Owned], found: &[u32], to: &Destination
     let mut hint = usize::MAX;
     for (i, o) in owned.iter().enumerate() {
         let f = |b: usize| found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
+        if vanished(found, i) {
+            continue;
+        }
         let (t, mask) = match o.samples {
             Samples::Ball(ball) => {
                 hint = match f(6) {
@@ -318,6 +326,20 @@ fn hand_down(mesh: &WeldedMesh, owned: &[Owned], found: &[u32], to: &Destination
         }
     }
     out
+}
+
+/// Whether measuring marked entry `i`'s samples [`VANISHED`] (any of them: the mark depends on
+/// the entry only, its part and radius).
+fn vanished(found: &[u32], i: usize) -> bool {
+    found.get(7 * i..7 * i + 7).is_some_and(|slots| slots.contains(&VANISHED))
+}
+
+/// `owned` without the entries measuring marked [`VANISHED`] in `found` (7 slots per entry).
+pub fn without_vanished(owned: Vec<Owned>, found: &[u32]) -> Vec<Owned> {
+    if !found.contains(&VANISHED) {
+        return owned;
+    }
+    owned.into_iter().enumerate().filter(|(i, _)| !vanished(found, *i)).map(|(_, o)| o).collect()
 }
 
 /// Per triangle of `output`, the index of the child cluster (of `children`, its split) that
