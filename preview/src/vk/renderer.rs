@@ -391,13 +391,7 @@ impl Renderer {
                     vk::PipelineStageFlags2::COPY,
                     vk::AccessFlags2::TRANSFER_READ,
                 );
-                let size = std::mem::size_of::<GpuCounters>() as u64;
-                dev.cmd_copy_buffer(
-                    cmd,
-                    self.counters.raw,
-                    self.readback_counters.raw,
-                    &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size }],
-                );
+                self.copy_counters(dev, cmd);
                 dev.cmd_copy_buffer(
                     cmd,
                     self.visible.raw,

@@ -6,7 +6,7 @@
 use ash::vk;
 use bytemuck::bytes_of;
 
-use super::super::resources::{subresource_range, Image};
+use super::super::resources::{subresource_range, Image, Pipeline};
 use super::{barrier, PresentTarget, RenderTarget, Renderer, CLEAR_RGBA, CULL_GROUP_SIZE};
 use crate::gpu_types::{GpuCounters, DISPATCH_ARGS_OFFSET, DRAW_ARGS_OFFSET, MESH_ARGS_OFFSET, SELECT_ARGS_OFFSET};
 
@@ -135,30 +135,14 @@ impl Renderer {
             match (&self.mesh_front, &self.mesh_back, &self.device.mesh) {
                 (Some(front), Some(back), Some(mesh)) if self.mesh_path => {
                     for pipeline in [front, back] {
-                        dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
-                        dev.cmd_bind_descriptor_sets(
-                            cmd,
-                            vk::PipelineBindPoint::GRAPHICS,
-                            self.descriptors.layout.raw,
-                            0,
-                            &[self.descriptors.set],
-                            &[],
-                        );
+                        self.bind_graphics(dev, cmd, pipeline);
                         mesh.cmd_draw_mesh_tasks_indirect(cmd, self.counters.raw, MESH_ARGS_OFFSET, 1, 12);
                     }
                 }
                 _ => {
                     dev.cmd_bind_index_buffer(cmd, self.indices.raw, 0, vk::IndexType::UINT32);
                     for pipeline in [&self.draw_front, &self.draw_back] {
-                        dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
-                        dev.cmd_bind_descriptor_sets(
-                            cmd,
-                            vk::PipelineBindPoint::GRAPHICS,
-                            self.descriptors.layout.raw,
-                            0,
-                            &[self.descriptors.set],
-                            &[],
-                        );
+                        self.bind_graphics(dev, cmd, pipeline);
                         dev.cmd_draw_indexed_indirect(cmd, self.counters.raw, DRAW_ARGS_OFFSET, 1, 20);
                     }
                 }
@@ -257,13 +241,7 @@ impl Renderer {
                 vk::PipelineStageFlags2::COPY,
                 vk::AccessFlags2::TRANSFER_READ,
             );
-            let size = std::mem::size_of::<GpuCounters>() as u64;
-            dev.cmd_copy_buffer(
-                cmd,
-                self.counters.raw,
-                self.readback_counters.raw,
-                &[vk::BufferCopy { src_offset: 0, dst_offset: 0, size }],
-            );
+            self.copy_counters(dev, cmd);
             barrier(
                 dev,
                 cmd,
@@ -273,6 +251,38 @@ impl Renderer {
                 vk::AccessFlags2::HOST_READ,
             );
         }
+    }
+
+    /// Binds graphics `pipeline` and the renderer's descriptor set.
+    ///
+    /// # Safety
+    /// `cmd` must be recording, on `dev`, inside a rendering pass.
+    unsafe fn bind_graphics(&self, dev: &ash::Device, cmd: vk::CommandBuffer, pipeline: &Pipeline) {
+        // SAFETY: per this function's contract; all handles are owned by `self`.
+        unsafe {
+            dev.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
+            let sets = [self.descriptors.set];
+            dev.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::GRAPHICS,
+                self.descriptors.layout.raw,
+                0,
+                &sets,
+                &[],
+            );
+        }
+    }
+
+    /// Copies the counters to their host-readable buffer.
+    ///
+    /// # Safety
+    /// `cmd` must be recording, on `dev`, after a barrier that makes the counters a transfer
+    /// source.
+    pub(super) unsafe fn copy_counters(&self, dev: &ash::Device, cmd: vk::CommandBuffer) {
+        let size = std::mem::size_of::<GpuCounters>() as u64;
+        let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size }];
+        // SAFETY: per this function's contract; all handles are owned by `self`.
+        unsafe { dev.cmd_copy_buffer(cmd, self.counters.raw, self.readback_counters.raw, &region) };
     }
 
     /// Records the blit of the rendered colour image (in TRANSFER_SRC_OPTIMAL) into the
