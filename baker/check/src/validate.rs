@@ -19,7 +19,7 @@ use crate::conditioning::{conditioning, Conditioning};
 use crate::honesty::Honesty;
 pub use crate::tables::Thresholds;
 use crate::tables::{edge_tables, Edges};
-use mres_format::{select, MresError, MresFile, Sphere, NO_GROUP};
+use mres_format::{select, DecodedCluster, MresError, MresFile, Sphere, NO_GROUP};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use serde::Serialize;
@@ -133,10 +133,29 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
         ..Default::default()
     };
     report.bytes_per_input_triangle = report.bytes as f64 / report.source_triangles.max(1) as f64;
-    let groups = &file.groups;
-    let clusters = &file.clusters;
+    levels_and_relations(file, &mut report, max);
+    let edges = edge_tables(file, &decoded);
+    // Conditioning (§3).
+    let (shape, problems) = conditioning(file, &decoded, &edges, &options.thresholds);
+    report.conditioning = shape;
+    report.thresholds = options.thresholds.clone();
+    for p in problems {
+        report.violation(max, || p);
+    }
+    // Honesty (§4), open-border marks (§1 (a), (b)), crack-free cuts (§1 (c)).
+    honesty(file, &decoded, (&options.thresholds, max), &mut report);
+    for p in mark_problems(file, &edges) {
+        report.violation(max, || p);
+    }
+    crack_free_cuts(file, &edges, options, &mut report);
+    Ok(report)
+}
 
-    // Shape figures and monotone errors, nested spheres (§2).
+/// The per-level figures, the roots and level-0 fill, and the relations of §2 (monotone errors,
+/// nested spheres, DAG order; every group with a finite error produced clusters): into `report`,
+/// violations listed up to `max`.
+fn levels_and_relations(file: &MresFile, report: &mut Report, max: usize) {
+    let (groups, clusters) = (&file.groups, &file.clusters);
     let cluster_level = |c: &mres_format::ClusterInfo| {
         if c.own_group == NO_GROUP {
             0
@@ -200,19 +219,12 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
     }
     let level0 = &report.per_level.first().cloned().unwrap_or_default();
     report.level0_fill = level0.triangles as f64 / level0.clusters.max(1) as f64;
+}
 
-    let edges = edge_tables(file, &decoded);
-    // Conditioning (§3).
-    let (shape, problems) = conditioning(file, &decoded, &edges, &options.thresholds);
-    report.conditioning = shape;
-    report.thresholds = options.thresholds.clone();
-    for p in problems {
-        report.violation(max, || p);
-    }
-
-    // Honesty (§4).
-    let t = &options.thresholds;
-    report.honesty = crate::honesty::measure(file, &decoded, t.honesty_cuts, t.honesty_samples);
+/// The honesty of the stored errors (§4), measured over `t.honesty_cuts` cuts: into `report`, a
+/// violation above `t.max_error_ratio` (violations listed up to `max`).
+fn honesty(file: &MresFile, decoded: &[DecodedCluster], (t, max): (&Thresholds, usize), report: &mut Report) {
+    report.honesty = crate::honesty::measure(file, decoded, t.honesty_cuts, t.honesty_samples);
     if report.honesty.worst_ratio > t.max_error_ratio {
         let h = report.honesty.clone();
         report.violation(max, || {
@@ -222,13 +234,13 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
             )
         });
     }
+}
 
-    // Open-border marks (§1 (a), (b)).
-    for p in mark_problems(file, &edges) {
-        report.violation(max, || p);
-    }
-
-    // Crack-free cuts (§1 (c)).
+/// The crack-free cuts of §1 (c): the uniform cuts at (up to `options.uniform_cuts` of) the
+/// groups' errors and `options.random_cuts` view cuts, checked on every thread: into `report`.
+fn crack_free_cuts(file: &MresFile, edges: &Edges, options: &ValidateOptions, report: &mut Report) {
+    let (groups, clusters) = (&file.groups, &file.clusters);
+    let max = options.max_listed;
     let mut thresholds: Vec<f32> = groups.iter().map(|g| g.error).filter(|e| e.is_finite()).collect();
     thresholds.push(0.0);
     thresholds.sort_by(f32::total_cmp);
@@ -248,10 +260,10 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
     report.random_cuts = cameras.len() as u64;
     let checks: Vec<(String, CutCheck)> = uniform
         .into_par_iter()
-        .map(|(name, cut)| (name, check_cut(&edges, &cut, groups, clusters)))
+        .map(|(name, cut)| (name, check_cut(edges, &cut, groups, clusters)))
         .chain(cameras.into_par_iter().map(|(view, tau)| {
             let cut = select::view_cut(groups, clusters, &view, tau);
-            (format!("view cut eye {:?} tau {tau} px", view.eye), check_cut(&edges, &cut, groups, clusters))
+            (format!("view cut eye {:?} tau {tau} px", view.eye), check_cut(edges, &cut, groups, clusters))
         }))
         .collect();
     for (name, check) in checks {
@@ -264,7 +276,6 @@ pub fn validate(file: &MresFile, options: &ValidateOptions) -> Result<Report, Mr
             });
         }
     }
-    Ok(report)
 }
 
 /// True if `outer` contains `inner` (checked in f64).
