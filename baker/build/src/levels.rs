@@ -361,12 +361,12 @@ impl<'a> Builder<'a> {
         };
         let indices = split(&s.indices, &mesh.positions, settings.max_triangles as usize / 4, settings);
         let open = open::mark(mesh, &indices, &s.needed);
+        let (owned, found) = without_vanished(owned, found);
         let owned = if owned.is_empty() {
             vec![Vec::new(); indices.len()]
         } else if part.len() == self.pending.len() && one_group(indices.len(), settings.group_size as usize) {
             // The level's only group, whose children will all form the next level's only
             // group: handing its samples down to them only to join them again is spared.
-            let owned = without_vanished(owned, &found);
             keep_together(mesh, owned, s.indices.len() / 3, (error, part_size), indices.len())
         } else {
             assign_owned(mesh, &owned, (&s.indices, &found), &indices, (error, part_size))

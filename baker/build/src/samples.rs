@@ -184,9 +184,9 @@ pub fn sample_point(t: &Triangle<f32>, b: usize) -> [f32; 3] {
 /// whole, by its centre. The next level measures the sample against that cluster's group. A
 /// sample must go to a cluster near itself, not just near its triangle: where a group border
 /// later runs between two clusters, a level-0 triangle can straddle it, and its far corner would
-/// be measured across the border. Every sample stays under exactly one pending cluster, but
-/// those measuring marked [`VANISHED`], which go to none. Each cluster's samples are then
-/// gathered into balls (see `gather`).
+/// be measured across the border. Every sample stays under exactly one pending cluster (those
+/// measuring marked [`VANISHED`] are left out before: [`without_vanished`]). Each cluster's
+/// samples are then gathered into balls (see `gather`).
 pub fn assign_owned(
     mesh: &WeldedMesh,
     owned: &[Owned],
@@ -290,9 +290,6 @@ fn hand_down(mesh: &WeldedMesh, owned: &[Owned], found: &[u32], to: &Destination
     let mut hint = usize::MAX;
     for (i, o) in owned.iter().enumerate() {
         let f = |b: usize| found.get(7 * i + b).copied().unwrap_or(NOT_FOUND);
-        if vanished(found, i) {
-            continue;
-        }
         let (t, mask) = match o.samples {
             Samples::Ball(ball) => {
                 hint = match f(6) {
@@ -328,18 +325,15 @@ fn hand_down(mesh: &WeldedMesh, owned: &[Owned], found: &[u32], to: &Destination
     out
 }
 
-/// Whether measuring marked entry `i`'s samples [`VANISHED`] (any of them: the mark depends on
-/// the entry only, its part and radius).
-fn vanished(found: &[u32], i: usize) -> bool {
-    found.get(7 * i..7 * i + 7).is_some_and(|slots| slots.contains(&VANISHED))
-}
-
-/// `owned` without the entries measuring marked [`VANISHED`] in `found` (7 slots per entry).
-pub fn without_vanished(owned: Vec<Owned>, found: &[u32]) -> Vec<Owned> {
+/// `owned` and its `found` slots (7 per entry) without the entries measuring marked
+/// [`VANISHED`] (it fills all of an entry's slots): what is handed down.
+pub fn without_vanished(owned: Vec<Owned>, found: Vec<u32>) -> (Vec<Owned>, Vec<u32>) {
     if !found.contains(&VANISHED) {
-        return owned;
+        return (owned, found);
     }
-    owned.into_iter().enumerate().filter(|(i, _)| !vanished(found, *i)).map(|(_, o)| o).collect()
+    let kept = owned.into_iter().zip(found.chunks_exact(7)).filter(|(_, slots)| slots[0] != VANISHED);
+    let (owned, slots): (Vec<Owned>, Vec<&[u32]>) = kept.unzip();
+    (owned, slots.concat())
 }
 
 /// Per triangle of `output`, the index of the child cluster (of `children`, its split) that
