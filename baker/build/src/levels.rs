@@ -29,7 +29,8 @@ use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 pub const MAX_ROOT_CLUSTERS: usize = 256;
 /// `always_locked` reason: on a shard or cell border (never unlocked in that cell).
 const CELL_BORDER: u8 = 1;
-/// `always_locked` reason: on a non-manifold edge (unlocked when every group is stuck).
+/// `always_locked` reason: on a non-manifold edge (unlocked for a stuck group, see
+/// [`Builder::simplify_parts`]).
 const NON_MANIFOLD: u8 = 2;
 /// A stuck top of at most this many clusters is simplified as one group (the validator's
 /// largest group size, docs/INVARIANTS.md §3).
@@ -302,34 +303,50 @@ impl<'a> Builder<'a> {
     /// Simplifies each part (a group of pending clusters, whose triangles are `refs`) in
     /// parallel, with the positions it shares with other parts locked; `None` where stuck.
     /// `lock` selects which [`always_locked`] reasons hold (the cell border always does).
-    /// Two rounds, for the chords between locked positions (see [`crate::chords`]).
+    /// Two rounds, for the chords between locked positions (see [`crate::chords`]); where
+    /// `lock` keeps the non-manifold edges and some parts simplify, a third for the stuck
+    /// parts with those edges unlocked.
     fn simplify_parts(&self, parts: &[Vec<u32>], refs: &[&[u32]], lock: u8) -> Vec<Option<Simplified>> {
         let mesh = self.mesh;
         // Positions used by two groups are locked.
         let owner = owners(mesh, parts, refs);
         let shared = |p: u32| owner[p as usize].load(Relaxed) == SHARED;
         let always_locked = &self.always_locked;
-        let kept = |p: u32| always_locked[p as usize] & (CELL_BORDER | lock) != 0;
-        let locked = |v: u32| {
-            let p = mesh.position_ids[v as usize];
-            shared(p) || kept(p)
+        let kept_by = |lock: u8| move |p: u32| always_locked[p as usize] & (CELL_BORDER | lock) != 0;
+        let locked_by = |lock: u8| {
+            move |v: u32| {
+                let p = mesh.position_ids[v as usize];
+                shared(p) || kept_by(lock)(p)
+            }
         };
+        let (kept, locked) = (kept_by(lock), locked_by(lock));
         let chords = Chords::new(parts, refs, &mesh.position_ids, shared);
         let free = |e: u64| chords.free(e, kept);
         let first = Locks { vertex: &locked, chord: &free };
         let mut results: Vec<Option<Simplified>> =
             parts.par_iter().map(|part| self.simplify_part(part, refs, &first, lock)).collect();
         let added: Vec<Option<&[u64]>> = results.iter().map(|r| r.as_ref().map(|s| s.chords.as_slice())).collect();
-        let again: Vec<(usize, Option<Simplified>)> = chords::conflicted(&added)
-            .into_par_iter()
-            .map(|g| {
+        // Each group of a later round may add only chords no other group can have.
+        let again = |groups: Vec<usize>, lock: u8| -> Vec<(usize, Option<Simplified>)> {
+            let (kept, locked) = (kept_by(lock), locked_by(lock));
+            let run = |g: usize| {
                 let unshared = |e: u64| chords.unshared(g as u32, e, kept);
                 let locks = Locks { vertex: &locked, chord: &unshared };
                 (g, self.simplify_part(&parts[g], refs, &locks, lock))
-            })
-            .collect();
-        for (g, result) in again {
+            };
+            groups.into_par_iter().map(run).collect()
+        };
+        for (g, result) in again(chords::conflicted(&added), lock) {
             results[g] = result;
+        }
+        if lock != 0 && results.iter().any(Option::is_some) {
+            // Some groups simplified and some are stuck: the stuck ones try again with the
+            // non-manifold edges unlocked, rather than waiting for a level where all are stuck.
+            // Their unshared chords cannot meet another group's, of any round.
+            let stuck = (0..parts.len()).filter(|&g| results[g].is_none()).collect();
+            for (g, result) in again(stuck, 0) {
+                results[g] = result;
+            }
         }
         results
     }
@@ -641,6 +658,54 @@ mod tests {
         }
         indices.extend([4, 5, 12]);
         weld(&SourceMesh::positions_only(positions, indices), &BakeSettings::default()).unwrap()
+    }
+
+    /// Two separate grids of quads far apart, of 128 triangles each: 8 × 6 quads where every
+    /// third triangle is there twice (its edges are non-manifold, most positions locked), and
+    /// 8 × 8 quads.
+    fn grid_and_doubled_grid() -> WeldedMesh {
+        let (mut positions, mut indices) = (Vec::new(), Vec::new());
+        for (g, (x0, rows)) in [(0.0f32, 6u32), (100.0, 8)].into_iter().enumerate() {
+            let base = positions.len() as u32;
+            for y in 0..=rows {
+                for x in 0..9 {
+                    // A gentle bump, so that collapses have a cost.
+                    let z = ((x as f32 - 4.0).powi(2) + (y as f32 - 4.0).powi(2)) * 0.01;
+                    positions.push([x0 + x as f32, y as f32, z]);
+                }
+            }
+            for y in 0..rows {
+                for x in 0..8u32 {
+                    let v = |dx: u32, dy: u32| base + (y + dy) * 9 + x + dx;
+                    for (k, t) in [[v(0, 0), v(1, 0), v(1, 1)], [v(0, 0), v(1, 1), v(0, 1)]].into_iter().enumerate() {
+                        indices.extend(t);
+                        if g == 0 && (2 * (y * 8 + x) + k as u32).is_multiple_of(3) {
+                            indices.extend(t);
+                        }
+                    }
+                }
+            }
+        }
+        weld(&SourceMesh::positions_only(positions, indices), &BakeSettings::default()).unwrap()
+    }
+
+    #[test]
+    fn a_group_stuck_on_non_manifold_edges_retries_with_them_unlocked_when_others_simplify() {
+        let mesh = grid_and_doubled_grid();
+        let settings = BakeSettings::default();
+        let edges = Level0Edges::new(&mesh);
+        let clusters = level0(&mesh, &settings, (&edges, &edges.odd()), &triangle_order(&mesh));
+        let doubled = |c: &BuiltCluster| mesh.positions[c.indices[0] as usize][0] < 10.0;
+        let parts: Vec<Vec<u32>> = [true, false]
+            .map(|d| (0..clusters.len() as u32).filter(|&c| doubled(&clusters[c as usize]) == d).collect())
+            .into();
+        assert_eq!(parts, vec![vec![0], vec![1]], "one level-0 cluster per grid");
+        let builder = Builder::new(&mesh, &settings, clusters, 0);
+        let refs: Vec<&[u32]> = builder.clusters.iter().map(|c| c.indices.as_slice()).collect();
+        let results = builder.simplify_parts(&parts, &refs, NON_MANIFOLD);
+        let kept = |r: &Option<Simplified>| r.as_ref().map(|s| s.children.iter().map(|c| c.indices.len() / 3).sum());
+        // Both grids halve; without the retry the doubled one stays stuck (None).
+        assert_eq!(results.iter().map(kept).collect::<Vec<Option<usize>>>(), vec![Some(63), Some(63)]);
     }
 
     #[test]

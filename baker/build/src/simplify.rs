@@ -79,6 +79,9 @@ pub fn simplify_group(
     settings: &BakeSettings,
     lenient: bool,
 ) -> Option<Simplified> {
+    if indices.is_empty() {
+        return None; // meshoptimizer asserts on a target above the input
+    }
     let locked = locks.vertex;
     // Compact the group's vertices so that each group works on a small, local vertex array.
     let mut vertices: Vec<u32> = indices.to_vec();
