@@ -111,7 +111,8 @@ pub fn simplify_group(
         if method == Method::Permissive && weights.is_empty() {
             continue; // without attributes there are no seams to relax
         }
-        let mut locks: Vec<bool> = vertices.iter().map(|&v| locked(v)).collect();
+        let pinned = |v: u32| group.border.pinned.binary_search(&mesh.position_ids[v as usize]).is_ok();
+        let mut locks: Vec<bool> = vertices.iter().map(|&v| locked(v) || pinned(v)).collect();
         let mut ratio = settings.simplify_ratio;
         for _ in 0..REPAIR_ATTEMPTS {
             let target = ((triangles as f32 * ratio) as usize).max(1) * 3;
@@ -231,6 +232,12 @@ struct EdgeCounts<'a> {
     open: Vec<u32>,
     /// Any position may be joined by an open output edge (see [`simplify_group`]).
     lenient: bool,
+    /// Positions locked before the first run, sorted: the corners of each triangle whose
+    /// three edges the group uses once each, one of them a border edge. Such a triangle
+    /// stands alone in the group (half of a card split between groups), so collapsing a
+    /// corner along its open edges would remove it and its border edge with it; the check
+    /// would refuse that, and the repair that follows runs again aiming higher.
+    pinned: Vec<u32>,
 }
 
 fn edge_keys(mesh: &WeldedMesh, indices: &[u32]) -> Vec<u64> {
@@ -251,7 +258,7 @@ impl<'a> EdgeCounts<'a> {
         let marked = open::marked_edges(mesh, indices, masks);
         let marks = |e: u64| open::count(&marked, e);
         let is_locked = |p: u32| locked.binary_search(&p).is_ok();
-        let border = keys
+        let border: Vec<(u64, u32, u32)> = keys
             .chunk_by(|a, b| a == b)
             .filter_map(|r| {
                 let m = marks(r[0]);
@@ -266,7 +273,8 @@ impl<'a> EdgeCounts<'a> {
         let mut open: Vec<u32> = marked.iter().flat_map(|&e| edge_ends(e)).collect();
         open.sort_unstable();
         open.dedup();
-        EdgeCounts { border, locked: locked.to_vec(), chord, open, lenient: false }
+        let pinned = pinned(mesh, indices, &keys, &border);
+        EdgeCounts { border, locked: locked.to_vec(), chord, open, lenient: false, pinned }
     }
 
     /// True when the group shares no edge or position with anything else (or is lenient).
@@ -322,6 +330,27 @@ impl<'a> EdgeCounts<'a> {
             Err(bad)
         }
     }
+}
+
+/// The corners of the triangles of `indices` whose three edges are each used once among the
+/// sorted edge `keys`, one of them in `border` (see [`EdgeCounts::pinned`]); sorted.
+fn pinned(mesh: &WeldedMesh, indices: &[u32], keys: &[u64], border: &[(u64, u32, u32)]) -> Vec<u32> {
+    let once = |e: u64| {
+        let start = keys.partition_point(|&k| k < e);
+        keys.get(start + 1) != Some(&e)
+    };
+    let on_border = |e: u64| border.binary_search_by_key(&e, |b| b.0).is_ok();
+    let mut out = Vec::new();
+    for t in indices.chunks_exact(3) {
+        let p = [0, 1, 2].map(|k| mesh.position_ids[t[k] as usize]);
+        let e = [0, 1, 2].map(|k| mres_geom::edges::edge_key(p[k], p[(k + 1) % 3]));
+        if e.iter().all(|&e| once(e)) && e.iter().any(|&e| on_border(e)) {
+            out.extend_from_slice(&p);
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
 }
 
 /// Per-vertex attribute rows (normal xyz, uv normalized to the mesh's UV range) and weights.
@@ -410,4 +439,53 @@ fn prune_components(
     }
     let kept = local.chunks_exact(3).filter(|t| !removed[root[t[0] as usize] as usize]).flatten().copied().collect();
     (kept, error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::levels::Level0Edges;
+    use crate::weld::weld;
+    use mres_geom::edges::edge_key;
+    use mres_import::SourceMesh;
+
+    /// A row of 40 cards (quads of two triangles, apart from each other, slightly bent so
+    /// that collapses have a cost); the last is a tenth of the others' size.
+    fn cards() -> WeldedMesh {
+        let (mut positions, mut indices) = (Vec::new(), Vec::new());
+        for c in 0..40u32 {
+            let (x, s) = (c as f32 * 2.0, if c == 39 { 0.1 } else { 1.0 });
+            positions.extend([[x, 0.0, 0.0], [x + s, 0.0, 0.1 * s], [x + s, s, 0.0], [x, s, 0.1 * s]]);
+            indices.extend([4 * c, 4 * c + 1, 4 * c + 2, 4 * c, 4 * c + 2, 4 * c + 3]);
+        }
+        weld(&SourceMesh::positions_only(positions, indices), &BakeSettings::default()).unwrap()
+    }
+
+    #[test]
+    fn half_a_card_on_the_group_border_is_kept_without_a_repair() {
+        let mesh = cards();
+        let odd = Level0Edges::new(&mesh).odd();
+        // The group holds every card but the last one's second triangle, which another group
+        // holds: the last card's diagonal is a group border, its ends locked.
+        let group = mesh.indices[..mesh.indices.len() - 3].to_vec();
+        let masks = crate::open::mark(&mesh, std::slice::from_ref(&group), &odd).remove(0);
+        let last = &mesh.indices[mesh.indices.len() - 3..];
+        let id = |v: u32| mesh.position_ids[v as usize];
+        let diagonal = [id(last[0]), id(last[1])];
+        let locked = |v: u32| diagonal.contains(&id(v));
+        let chord = |_: u64| true;
+        let locks = Locks { vertex: &locked, chord: &chord };
+        let settings = BakeSettings::default();
+        let s = simplify_group(&mesh, &group, &masks, &locks, &settings, false).expect("the group simplifies");
+        // The lone half card keeps its border edge; the first run, aiming at half the
+        // triangles, passes (a repair would aim at 60 %).
+        let keys = edge_keys(&mesh, &s.indices);
+        assert!(keys.contains(&edge_key(diagonal[0], diagonal[1])));
+        let triangles = group.len() / 3;
+        assert!(
+            s.indices.len() / 3 <= (triangles as f32 * settings.simplify_ratio) as usize,
+            "{} of {triangles}",
+            s.indices.len() / 3
+        );
+    }
 }
