@@ -12,7 +12,7 @@
 //! Measuring against C, not the original, keeps the cost local (a few thousand triangles per
 //! group), so the bake pays a small fraction of what measuring against the original did.
 //! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
-//! with their worst spots locked ([`simplify_measured`]).
+//! with their worst spots locked ([`measure_simplified`]).
 
 use crate::patches::{accept_patches, Box3};
 use crate::samples::{sample_point, set_bits, Owned, Samples, CENTROID, NOT_FOUND, VANISHED};
@@ -80,20 +80,26 @@ pub struct Reference<'a> {
     pub lenient: bool,
 }
 
-/// Simplifies a group (`simplify_group` on `input` with open-border `masks`) and measures its
-/// stored error against `reference` (see [`group_error`]). An outlier (whose error exceeds the
-/// members' by more than [`OUTLIER_RATIO`] × meshoptimizer's estimate) is simplified again with
-/// the vertices around its farthest samples locked as well, keeping the result with the
-/// smallest stored error. Returns the result and its stored error.
-pub fn simplify_measured(
+/// Measures the stored error of `first`, a group's simplification (`simplify_group` on `input`
+/// with open-border `masks` and `locks`), against `reference` (see [`group_error`]). An outlier
+/// (whose error exceeds the members' by more than [`OUTLIER_RATIO`] × meshoptimizer's estimate)
+/// is simplified again with the vertices around its farthest samples locked as well, keeping
+/// the result with the smallest stored error. Returns the result and its stored error.
+///
+/// The caller simplifies first and measures only the results it keeps (a level's chord
+/// conflicts and stuck groups are settled before any measure); `locks.chord` must then allow
+/// only chords no other group of the level can add besides those `first` has, so that a retry
+/// cannot meet another group's chord.
+#[allow(clippy::too_many_arguments)]
+pub fn measure_simplified(
     mesh: &WeldedMesh,
-    input: &[u32],
-    masks: &[u8],
+    (input, masks): (&[u32], &[u8]),
+    first: Simplified,
     reference: &Reference,
     locks: &Locks,
     settings: &BakeSettings,
     part_size: &[f32],
-) -> Option<Measured> {
+) -> Measured {
     let (members, triangles, errors) = (reference.members_error, &reference.triangles[..], &reference.errors);
     let small = SMALL_TRIANGLE * members as f64;
     let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.owned, small, members: input };
@@ -107,7 +113,7 @@ pub fn simplify_measured(
         let (total, far, found) = measure(mesh, &sides, &s.indices, part_size, floor, record, reference.original);
         (stored(total, s.error).max(members), far, found)
     };
-    let mut best = simplify_group(mesh, input, masks, locks, settings, reference.lenient)?;
+    let mut best = first;
     let (mut error, mut far, mut found) = error_of(&best);
     let mut extra: Vec<u32> = Vec::new();
     for _ in 0..OUTLIER_RETRIES {
@@ -134,10 +140,10 @@ pub fn simplify_measured(
         }
         (best, error, far, found) = (retry, e, fa, f);
     }
-    Some(Measured { simplified: best, error, found })
+    Measured { simplified: best, error, found }
 }
 
-/// What [`simplify_measured`] returns.
+/// What [`measure_simplified`] returns.
 pub struct Measured {
     /// The simplified group.
     pub simplified: Simplified,
@@ -150,7 +156,7 @@ pub struct Measured {
 }
 
 /// A group's stored error (object space) when all its members have error `members_error`: see
-/// [`simplify_measured`] and `measure`. At least `simplifier_error`, meshoptimizer's estimate.
+/// [`measure_simplified`] and `measure`. At least `simplifier_error`, meshoptimizer's estimate.
 /// Both triangle lists are in welded vertex ids; `part_size` is [`part_sizes`].
 pub fn group_error(
     mesh: &WeldedMesh,

@@ -8,14 +8,14 @@
 use crate::chords::{self, Chords};
 use crate::cluster::{bounding_sphere, enclosing_sphere, split};
 use crate::dag::{BuildStats, BuiltCluster, BuiltGroup, Cell, Converted, DagOutput, TopCluster, LOCAL};
-use crate::deviation::{part_sizes, simplify_measured, Original, Reference};
+use crate::deviation::{measure_simplified, part_sizes, Original, Reference};
 use crate::error::BakeError;
 use crate::open;
 use crate::partition::{cluster_graph, one_group, partition, triangle_order};
 use crate::progress::Progress;
 use crate::samples::{assign_owned, keep_together, merge_owned, sort_owned, without_vanished, Owned, CENTROID};
 use crate::settings::{BakeSettings, ErrorBound};
-use crate::simplify::{simplify_group, Locks, Method};
+use crate::simplify::{self, simplify_group, Locks, Method};
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
 use mres_geom::edges::{edge_keys, sorted_edge_keys};
@@ -45,8 +45,57 @@ struct Simplified {
     children: Vec<Child>,
     error: f32,
     method: Method,
-    /// The chords it added (see [`crate::chords`]).
-    chords: Vec<u64>,
+}
+
+/// A part's simplification that a level keeps, with the `lock` of the round that made it
+/// (which [`always_locked`] reasons held); `None` where stuck.
+type Kept = Option<(simplify::Simplified, u8)>;
+
+/// What a level's groups must keep: the positions two groups use (the group borders), the
+/// positions [`always_locked`] for the reasons a round holds, and which chords a group may add
+/// (see [`crate::chords`]).
+struct LevelLocks<'a> {
+    mesh: &'a WeldedMesh,
+    always_locked: &'a [u8],
+    /// Per position id, the one group using it, or [`SHARED`].
+    owner: Vec<AtomicU32>,
+    chords: Chords,
+}
+
+impl<'a> LevelLocks<'a> {
+    fn new(mesh: &'a WeldedMesh, always_locked: &'a [u8], parts: &[Vec<u32>], refs: &[&[u32]]) -> Self {
+        let owner = owners(mesh, parts, refs);
+        let chords = Chords::new(parts, refs, &mesh.position_ids, |p| owner[p as usize].load(Relaxed) == SHARED);
+        LevelLocks { mesh, always_locked, owner, chords }
+    }
+
+    /// Whether position `p` is kept for the reasons `lock` selects (the cell border always).
+    fn kept(&self, lock: u8, p: u32) -> bool {
+        self.always_locked[p as usize] & (CELL_BORDER | lock) != 0
+    }
+
+    /// Whether welded vertex `v` is locked in a round holding `lock`: on a group border, or kept.
+    fn vertex(&self, lock: u8, v: u32) -> bool {
+        let p = self.mesh.position_ids[v as usize];
+        self.owner[p as usize].load(Relaxed) == SHARED || self.kept(lock, p)
+    }
+
+    /// The first round's chord rule ([`Chords::free`]). A chord may end on a non-manifold
+    /// position: the chords know every group holding it.
+    fn free(&self, e: u64) -> bool {
+        self.chords.free(e, |p| self.kept(0, p))
+    }
+
+    /// The later rounds' rule for group `g` ([`Chords::unshared`]).
+    fn unshared(&self, g: u32, e: u64) -> bool {
+        self.chords.unshared(g, e, |p| self.kept(0, p))
+    }
+}
+
+/// A part's triangles and open-border marks (see [`Builder::part_input`]).
+struct PartInput {
+    merged: Vec<u32>,
+    masks: Vec<u8>,
 }
 
 /// One parent cluster of a simplified group: triangles, open-border marks, owned level-0
@@ -301,66 +350,86 @@ impl<'a> Builder<'a> {
     }
 
     /// Simplifies each part (a group of pending clusters, whose triangles are `refs`) in
-    /// parallel, with the positions it shares with other parts locked; `None` where stuck.
-    /// `lock` selects which [`always_locked`] reasons hold (the cell border always does).
-    /// Two rounds, for the chords between locked positions (see [`crate::chords`]); where
-    /// `lock` keeps the non-manifold edges and some parts simplify, a third for the stuck
-    /// parts with those edges unlocked.
+    /// parallel, with the positions it shares with other parts locked, and measures and splits
+    /// each result kept ([`Builder::simplify_rounds`], [`Builder::finish_part`]); `None` where
+    /// stuck. `lock` selects which [`always_locked`] reasons hold (the cell border always does).
     fn simplify_parts(&self, parts: &[Vec<u32>], refs: &[&[u32]], lock: u8) -> Vec<Option<Simplified>> {
-        let mesh = self.mesh;
-        // Positions used by two groups are locked.
-        let owner = owners(mesh, parts, refs);
-        let shared = |p: u32| owner[p as usize].load(Relaxed) == SHARED;
-        let always_locked = &self.always_locked;
-        let kept_by = |lock: u8| move |p: u32| always_locked[p as usize] & (CELL_BORDER | lock) != 0;
-        let locked_by = |lock: u8| {
-            move |v: u32| {
-                let p = mesh.position_ids[v as usize];
-                shared(p) || kept_by(lock)(p)
-            }
+        let level = LevelLocks::new(self.mesh, &self.always_locked, parts, refs);
+        let inputs: Vec<PartInput> = parts.par_iter().map(|part| self.part_input(part, refs)).collect();
+        let kept = self.simplify_rounds(&level, &inputs, lock);
+        // A retry of an outlier may add its result's own chords and unshared ones: none that
+        // another group's kept result has or a retry of another group can add.
+        let finish = |(g, kept): (usize, Kept)| {
+            let (s, lock) = kept?;
+            let own = s.chords.clone();
+            let chord = |e: u64| level.unshared(g as u32, e) || own.binary_search(&e).is_ok();
+            let vertex = |v: u32| level.vertex(lock, v);
+            let locks = Locks { vertex: &vertex, chord: &chord };
+            Some(self.finish_part(&parts[g], &inputs[g], s, &locks, lock))
         };
-        let locked = locked_by(lock);
-        let chords = Chords::new(parts, refs, &mesh.position_ids, shared);
-        // A chord may end on a non-manifold position: `chords` knows every group holding it.
-        let cell = kept_by(0);
-        let free = |e: u64| chords.free(e, cell);
-        let first = Locks { vertex: &locked, chord: &free };
-        let mut results: Vec<Option<Simplified>> =
-            parts.par_iter().map(|part| self.simplify_part(part, refs, &first, lock)).collect();
-        let added: Vec<Option<&[u64]>> = results.iter().map(|r| r.as_ref().map(|s| s.chords.as_slice())).collect();
+        kept.into_par_iter().enumerate().map(finish).collect()
+    }
+
+    /// The simplification of each part that a level keeps (see [`Kept`]), in rounds that only
+    /// simplify: two for the chords between locked positions (see [`crate::chords`]), and
+    /// where `lock` keeps the non-manifold edges and some parts simplify, a third for the
+    /// stuck parts with those edges unlocked. A result that a later round replaces is never
+    /// measured (on the two-cylinder engine, a quarter of the groups of the lower levels add a
+    /// chord a lower-numbered group added too).
+    fn simplify_rounds(&self, level: &LevelLocks, inputs: &[PartInput], lock: u8) -> Vec<Kept> {
+        let simplify = |g: usize, chord: &(dyn Fn(u64) -> bool + Sync), lock: u8| {
+            let vertex = |v: u32| level.vertex(lock, v);
+            let locks = Locks { vertex: &vertex, chord };
+            let input = &inputs[g];
+            simplify_group(self.mesh, &input.merged, &input.masks, &locks, self.settings, lock == 0).map(|s| (s, lock))
+        };
+        let free = |e: u64| level.free(e);
+        let mut kept: Vec<Kept> = (0..inputs.len()).into_par_iter().map(|g| simplify(g, &free, lock)).collect();
         // Each group of a later round may add only chords no other group can have.
-        let again = |groups: Vec<usize>, lock: u8| -> Vec<(usize, Option<Simplified>)> {
-            let locked = locked_by(lock);
-            let run = |g: usize| {
-                let unshared = |e: u64| chords.unshared(g as u32, e, cell);
-                let locks = Locks { vertex: &locked, chord: &unshared };
-                (g, self.simplify_part(&parts[g], refs, &locks, lock))
-            };
+        let again = |groups: Vec<usize>, lock: u8| -> Vec<(usize, Kept)> {
+            let run = |g: usize| (g, simplify(g, &|e: u64| level.unshared(g as u32, e), lock));
             groups.into_par_iter().map(run).collect()
         };
+        let added: Vec<Option<&[u64]>> = kept.iter().map(|k| k.as_ref().map(|s| s.0.chords.as_slice())).collect();
         for (g, result) in again(chords::conflicted(&added), lock) {
-            results[g] = result;
+            kept[g] = result;
         }
-        if lock != 0 && results.iter().any(Option::is_some) {
+        if lock != 0 && kept.iter().any(Option::is_some) {
             // Some groups simplified and some are stuck: the stuck ones try again with the
             // non-manifold edges unlocked, rather than waiting for a level where all are stuck.
             // Their unshared chords cannot meet another group's, of any round.
-            let stuck = (0..parts.len()).filter(|&g| results[g].is_none()).collect();
+            let stuck = (0..inputs.len()).filter(|&g| kept[g].is_none()).collect();
             for (g, result) in again(stuck, 0) {
-                results[g] = result;
+                kept[g] = result;
             }
         }
-        results
+        kept
     }
 
-    /// Simplifies one part (see [`Builder::simplify_parts`]) with `locks`; `None` where stuck.
-    fn simplify_part(&self, part: &[u32], refs: &[&[u32]], locks: &Locks, lock: u8) -> Option<Simplified> {
+    /// A part's triangles (its clusters' triangles one after another) and their open-border
+    /// marks: what its simplification runs on.
+    fn part_input(&self, part: &[u32], refs: &[&[u32]]) -> PartInput {
+        let members = part.iter().map(|&c| &self.clusters[self.pending[c as usize]]);
+        PartInput {
+            merged: part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect(),
+            masks: members.flat_map(|m| m.open.iter().copied()).collect(),
+        }
+    }
+
+    /// Measures one part's simplification `s` (made with `locks` from `input`, see
+    /// [`Builder::simplify_parts`]) and splits it into its children with their samples.
+    fn finish_part(
+        &self,
+        part: &[u32],
+        input: &PartInput,
+        s: simplify::Simplified,
+        locks: &Locks,
+        lock: u8,
+    ) -> Simplified {
         let (mesh, settings) = (self.mesh, self.settings);
         let (part_size, lenient) = (&self.part_size, lock == 0);
         let (clusters, pending) = (&self.clusters, &self.pending);
         let members = || part.iter().map(|&c| &clusters[pending[c as usize]]);
-        let merged: Vec<u32> = part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect();
-        let masks: Vec<u8> = members().flat_map(|m| m.open.iter().copied()).collect();
         let members_error = members().map(|m| m.own_error).fold(0.0, f32::max);
         let owned = match settings.error_bound {
             ErrorBound::Measured => merge_owned(members().map(|m| m.owned.as_slice())),
@@ -368,12 +437,13 @@ impl<'a> Builder<'a> {
         };
         let (s, error, found) = match settings.error_bound {
             ErrorBound::Measured => {
-                let reference = self.reference(part, &merged, &owned, members_error, lenient);
-                let m = simplify_measured(mesh, &merged, &masks, &reference, locks, settings, part_size)?;
+                let merged = &input.merged;
+                let reference = self.reference(part, merged, &owned, members_error, lenient);
+                let inputs = (&merged[..], &input.masks[..]);
+                let m = measure_simplified(mesh, inputs, s, &reference, locks, settings, part_size);
                 (m.simplified, m.error, m.found)
             }
             ErrorBound::Simplifier => {
-                let s = simplify_group(mesh, &merged, &masks, locks, settings, lenient)?;
                 let error = s.error;
                 (s, error, Vec::new())
             }
@@ -396,7 +466,7 @@ impl<'a> Builder<'a> {
             .zip(owned)
             .map(|((indices, open), owned)| Child { indices, open, owned })
             .collect();
-        Some(Simplified { children, error, method: s.method, chords: s.chords })
+        Simplified { children, error, method: s.method }
     }
 
     /// What a part's result is measured against: the level-0 triangles under it (`owned`,
@@ -696,11 +766,13 @@ mod tests {
         let parts = vec![(0..clusters.len() as u32).collect::<Vec<u32>>()];
         let builder = Builder::new(&mesh, &settings, clusters, 0);
         let refs: Vec<&[u32]> = builder.clusters.iter().map(|c| c.indices.as_slice()).collect();
-        let results = builder.simplify_parts(&parts, &refs, NON_MANIFOLD);
+        let level = LevelLocks::new(&mesh, &builder.always_locked, &parts, &refs);
+        let inputs = vec![builder.part_input(&parts[0], &refs)];
+        let results = builder.simplify_rounds(&level, &inputs, NON_MANIFOLD);
         // Refusing those chords left the group stuck (None): closing an ear between two
         // doubled triangles joins their locked corners.
-        let simplified = results[0].as_ref().expect("the group simplifies");
-        let kept: usize = simplified.children.iter().map(|c| c.indices.len() / 3).sum();
+        let (simplified, _) = results[0].as_ref().expect("the group simplifies");
+        let kept = simplified.indices.len() / 3;
         assert!(kept * 4 <= mesh.indices.len() / 3 * 3, "{kept} of {} triangles kept", mesh.indices.len() / 3);
         let non_manifold = |p: u32| builder.always_locked[p as usize] & NON_MANIFOLD != 0;
         assert!(simplified.chords.iter().any(|&e| edge_ends(e).iter().any(|&p| non_manifold(p))));

@@ -346,6 +346,7 @@ fn write_obj_named(mesh: &SourceMesh, names: &[Option<String>], out: Output) -> 
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    init_tracing();
     let result = match cli.command {
         Command::Validate(a) => validate_cmd(a),
         Command::Inspect(a) => inspect_cmd(a),
@@ -597,6 +598,18 @@ fn cache_cmd(a: CacheArgs) -> Result<ExitCode> {
     Ok(code)
 }
 
+/// Logs to stderr at the level `RUST_LOG` asks for (default: warnings only); `RUST_LOG=info`
+/// shows the builder's stages and levels, as `bake-all` does.
+fn init_tracing() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .init();
+}
+
 fn bench_child_cmd(a: BenchChildArgs) -> Result<ExitCode> {
     let settings = match &a.config {
         Some(path) => mres_cli::config::PipelineConfig::load(path).map_err(anyhow::Error::msg)?.bake,
@@ -636,6 +649,8 @@ fn bench_builder(builder: Builder, a: &BenchArgs) -> Result<BuilderRun> {
         if !out.status.success() {
             bail!("{name} on {}: {}", a.input.display(), String::from_utf8_lossy(&out.stderr).trim());
         }
+        // The child's log (RUST_LOG), if any, after its run.
+        std::io::stderr().write_all(&out.stderr)?;
         runs.push(serde_json::from_slice::<BuilderRun>(&out.stdout)?);
     }
     let min = |f: fn(&BuilderRun) -> f64| runs.iter().map(f).fold(f64::INFINITY, f64::min);
