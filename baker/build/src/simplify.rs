@@ -444,7 +444,6 @@ fn prune_components(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::levels::Level0Edges;
     use crate::weld::weld;
     use mres_geom::edges::edge_key;
     use mres_import::SourceMesh;
@@ -464,7 +463,7 @@ mod tests {
     #[test]
     fn half_a_card_on_the_group_border_is_kept_without_a_repair() {
         let mesh = cards();
-        let odd = Level0Edges::new(&mesh).odd();
+        let odd = crate::open::odd_of(&edge_keys(&mesh, &mesh.indices));
         // The group holds every card but the last one's second triangle, which another group
         // holds: the last card's diagonal is a group border, its ends locked.
         let group = mesh.indices[..mesh.indices.len() - 3].to_vec();
