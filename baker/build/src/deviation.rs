@@ -90,7 +90,6 @@ pub struct Reference<'a> {
 /// conflicts and stuck groups are settled before any measure); `locks.chord` must then allow
 /// only chords no other group of the level can add besides those `first` has, so that a retry
 /// cannot meet another group's chord.
-#[allow(clippy::too_many_arguments)]
 pub fn measure_simplified(
     mesh: &WeldedMesh,
     (input, masks): (&[u32], &[u8]),

@@ -360,8 +360,9 @@ impl<'a> Builder<'a> {
         // A retry of an outlier may add its result's own chords and unshared ones: none that
         // another group's kept result has or a retry of another group can add.
         let finish = |(g, kept): (usize, Kept)| {
-            let (s, lock) = kept?;
-            let own = s.chords.clone();
+            let (mut s, lock) = kept?;
+            // Nothing after the measure reads a result's chords.
+            let own = std::mem::take(&mut s.chords);
             let chord = |e: u64| level.unshared(g as u32, e) || own.binary_search(&e).is_ok();
             let vertex = |v: u32| level.vertex(lock, v);
             let locks = Locks { vertex: &vertex, chord: &chord };

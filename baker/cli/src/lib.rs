@@ -8,4 +8,5 @@ pub mod config;
 pub mod export;
 pub mod generate;
 pub mod inspect;
+pub mod log;
 pub mod tree;

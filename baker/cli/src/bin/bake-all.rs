@@ -102,19 +102,6 @@ fn main() -> ExitCode {
     }
 }
 
-fn init_tracing(format: LogFormat) {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal());
-    match format {
-        LogFormat::Text => builder.init(),
-        LogFormat::Json => builder.json().init(),
-    }
-}
-
 /// Everything decided before the first asset bakes; any problem here exits 2 with nothing baked.
 struct Setup {
     /// Where the assets were found (a single file's directory).
@@ -205,7 +192,7 @@ fn check_output_dir(dir: &Path) -> Result<()> {
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
-    init_tracing(cli.log_format);
+    mres_cli::log::init(matches!(cli.log_format, LogFormat::Json));
     if let Some(jobs) = cli.jobs {
         rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global()?;
     }

@@ -346,7 +346,7 @@ fn write_obj_named(mesh: &SourceMesh, names: &[Option<String>], out: Output) -> 
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    init_tracing();
+    mres_cli::log::init(false);
     let result = match cli.command {
         Command::Validate(a) => validate_cmd(a),
         Command::Inspect(a) => inspect_cmd(a),
@@ -596,18 +596,6 @@ fn cache_cmd(a: CacheArgs) -> Result<ExitCode> {
         println!("{text}");
     }
     Ok(code)
-}
-
-/// Logs to stderr at the level `RUST_LOG` asks for (default: warnings only); `RUST_LOG=info`
-/// shows the builder's stages and levels, as `bake-all` does.
-fn init_tracing() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
 }
 
 fn bench_child_cmd(a: BenchChildArgs) -> Result<ExitCode> {
