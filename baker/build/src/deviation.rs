@@ -47,16 +47,20 @@ const OUTLIER_RETRIES: usize = 3;
 
 /// Per position id, the bounding-box diagonal of the original (level-0) connected part it
 /// belongs to: how far off a point of that part can be when the part vanishes.
+/// The grown copies of [`crate::area`] (no level-0 triangle uses them) get 0.
 pub fn part_sizes(mesh: &WeldedMesh) -> Vec<f32> {
     let id = |v: u32| mesh.position_ids[v as usize];
-    let mut sets = UnionFind::new(mesh.position_count);
+    let level0 = mesh.ladder.as_ref().map_or(mesh.position_count, |l| l.level0_positions);
+    let mut sets = UnionFind::new(level0);
     for t in mesh.indices.chunks_exact(3) {
         sets.union(id(t[0]), id(t[1]));
         sets.union(id(t[0]), id(t[2]));
     }
     let points = mesh.positions.iter().enumerate().map(|(v, p)| (id(v as u32), p.map(f64::from)));
-    let diagonal = diagonals(&mut sets, points);
-    (0..mesh.position_count as u32).map(|p| diagonal[sets.find(p) as usize] as f32).collect()
+    let diagonal = diagonals(&mut sets, points.filter(|&(p, _)| (p as usize) < level0));
+    let mut sizes: Vec<f32> = (0..level0 as u32).map(|p| diagonal[sets.find(p) as usize] as f32).collect();
+    sizes.resize(mesh.position_count, 0.0);
+    sizes
 }
 
 /// The surface a group's output is measured against: the original (level-0) triangles under
@@ -117,7 +121,8 @@ pub fn measure_simplified(
     let mut extra: Vec<u32> = Vec::new();
     for _ in 0..OUTLIER_RETRIES {
         let (estimate, added) = (best.error as f64, error as f64 - members as f64);
-        if added <= OUTLIER_RATIO * estimate {
+        // Grown open parts (`preserve_area`) are off the surface on purpose: not an outlier.
+        if added <= OUTLIER_RATIO * estimate || best.grown {
             break;
         }
         // Lock around the samples farther than half the excess (and than the outlier ratio).

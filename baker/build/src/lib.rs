@@ -3,6 +3,7 @@
 //! (`docs/ARCHITECTURE.md` "Data flow of one bake").
 #![deny(missing_docs)]
 
+pub mod area;
 pub mod bake;
 pub mod chords;
 pub mod cluster;

@@ -70,6 +70,11 @@ pub struct BakeSettings {
     /// Write: how pages are stored, `"compact"` or `"layout"` (every page then decodes alone,
     /// whatever `independent_pages` says).
     pub page_encoding: PageEncoding,
+    /// Simplify: foliage keeps its area. Where a group removes small open parts (cards,
+    /// leaves), the open parts it keeps grow about their centres so that the group's
+    /// open-part area stays about the same (docs/INVARIANTS.md §4). The stored errors grow
+    /// with the dilation, so it is for meshes whose coverage matters more than their shape.
+    pub preserve_area: bool,
 }
 
 impl Default for BakeSettings {
@@ -105,6 +110,9 @@ impl Default for BakeSettings {
             // Distribution and caches want the smaller files; `mres repack` turns them into
             // layout pages where decode speed matters more than bytes.
             page_encoding: PageEncoding::Compact,
+            // Off: growing parts moves them off the surface (larger errors, more triangles at
+            // a given error); foliage assets turn it on.
+            preserve_area: false,
         }
     }
 }

@@ -3,6 +3,7 @@
 //! `simplify_with_attributes_and_locks`, absolute error, normals and UVs weighted),
 //! with a permissive and then a sloppy fallback when the group is stuck (as clusterlod does).
 
+use crate::area;
 use crate::open;
 use crate::settings::BakeSettings;
 use crate::weld::WeldedMesh;
@@ -36,6 +37,8 @@ pub struct Simplified {
     pub needed: Vec<u64>,
     /// The output's new edges between two locked positions (chords, see [`crate::chords`]).
     pub chords: Vec<u64>,
+    /// Whether open parts grew to keep the group's area (see [`crate::area`]).
+    pub grown: bool,
 }
 
 /// What a group's simplification must keep: the welded vertices it must not move, and which
@@ -121,7 +124,11 @@ pub fn simplify_group(
                 break;
             }
             match group.border.check(mesh, &out) {
-                Ok((needed, chords)) => return Some(Simplified { indices: out, error, method, needed, chords }),
+                Ok((mut needed, chords)) => {
+                    let mut out = out;
+                    let grown = area::grow(mesh, indices, &mut out, &mut needed, locked);
+                    return Some(Simplified { indices: out, error, method, needed, chords, grown });
+                }
                 Err(bad) => {
                     // Lock the offending edges' ends and their neighbours, and aim a little
                     // less low: such pinches come from the last collapses.

@@ -36,6 +36,40 @@ pub struct WeldedMesh {
     pub degenerate_dropped: u64,
     /// Triangles of the source.
     pub source_triangles: u64,
+    /// With `preserve_area`: the grown copies of its small open parts' vertices, appended
+    /// after the level-0 vertices (see [`crate::area`]).
+    pub ladder: Option<Ladder>,
+}
+
+/// Marks a vertex of no part that grows (see [`Ladder`]).
+pub(crate) const NO_PART: u32 = u32::MAX;
+
+/// The grown copies of a mesh's small open parts' vertices (see [`crate::area`], which makes
+/// and uses them; it is kept here, with the mesh it belongs to).
+#[derive(Clone, Debug, Default)]
+pub struct Ladder {
+    /// Per welded vertex: its part (an id shared by the part's vertices and copies), or NO_PART.
+    pub(crate) part: Vec<u32>,
+    /// Per welded vertex: its rung, 0 for the level-0 vertices.
+    pub(crate) rung: Vec<u8>,
+    /// Per welded vertex: the level-0 vertex it is a copy of (itself at rung 0).
+    pub(crate) base: Vec<u32>,
+    /// Per level-0 vertex of a part that grows: its copy at rung 1 (rung r at `+ r - 1`).
+    pub(crate) first_copy: Vec<u32>,
+    /// Position ids below this are the level-0 positions; the copies' follow.
+    pub level0_positions: usize,
+}
+
+impl Ladder {
+    /// The copy of `v`'s level-0 vertex at rung `r`.
+    pub(crate) fn at(&self, v: u32, r: u8) -> u32 {
+        let b = self.base[v as usize];
+        if r == 0 {
+            b
+        } else {
+            self.first_copy[b as usize] + u32::from(r) - 1
+        }
+    }
 }
 
 /// Welds `mesh` on a grid of `settings.position_bits` over its bounds. `None` if the mesh is
@@ -219,6 +253,7 @@ fn weld_units(
         indices: Vec::new(),
         degenerate_dropped: 0,
         source_triangles: 0,
+        ladder: None,
     };
     (out, unit_vertex.into_iter().map(AtomicU32::into_inner).collect())
 }

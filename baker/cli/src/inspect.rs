@@ -8,7 +8,7 @@ use serde::Serialize;
 use std::fmt::Write as _;
 
 /// Fractions of the bounds diagonal at which the triangles of uniform cuts are counted.
-pub const CUT_FRACTIONS: [f32; 10] = [0.0, 1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1];
+pub const CUT_FRACTIONS: [f32; 12] = [0.0, 1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1, 0.3, 1.0];
 
 /// The attributes a file stores, decoded from the header flags.
 #[derive(Clone, Debug, Serialize)]
@@ -172,6 +172,14 @@ fn area(file: &MresFile, cluster: &mres_format::DecodedCluster) -> f64 {
             0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
         })
         .sum()
+}
+
+/// The surface area of the uniform cut at each of `errors` (object units) over the level-0
+/// area: how much of a card field's (projected) area a coarse cut keeps. Reads and decodes
+/// every page; any damage is an error.
+pub fn cut_area_fractions(file: &MresFile, errors: &[f32]) -> Result<Vec<f64>, MresError> {
+    let (_, _, areas) = verify_and_bound(file)?;
+    Ok(errors.iter().map(|&e| cut_area_fraction(file, &areas, e)).collect())
 }
 
 /// Area of the uniform cut at `error` over the level-0 area.

@@ -74,6 +74,26 @@ fn uv_seams_and_materials_survive() {
     assert_eq!(counts, [per_material; 6]);
 }
 
+#[test]
+fn foliage_keeps_its_area_with_preserve_area() {
+    // 3,000 cards: coarse levels remove most of them. With `preserve_area` the cards kept grow
+    // so that every cut keeps about the card area of full detail; without it the coarsest cut
+    // keeps a few percent. Both validate (crack-free, honest errors, one root).
+    let cuts = [0.05, 0.2, f32::MAX];
+    let area = |preserve_area: bool| {
+        let settings = BakeSettings { preserve_area, ..BakeSettings::default() };
+        let bytes = bake_source(generate::cards(3000), &settings, &|_| {}).expect("bake").bytes;
+        let (file, report) = check(bytes, 200);
+        assert!(report.honesty.worst_ratio <= 1.0, "honesty {}", report.honesty.worst);
+        mres_cli::inspect::cut_area_fractions(&file, &cuts).expect("pages decode")
+    };
+    let (grown, plain) = (area(true), area(false));
+    assert!(plain[2] < 0.1, "without preserve_area the coarsest cut keeps {plain:?}");
+    for (cut, kept) in cuts.iter().zip(&grown) {
+        assert!((0.6..1.6).contains(kept), "cut at {cut}: area kept {kept} (all: {grown:?})");
+    }
+}
+
 /// Writes a glTF with two primitives (a sphere with normals, a terrain with UVs) in one mesh,
 /// instanced by two nodes with different transforms, buffers as a data URI.
 fn write_two_primitive_gltf(dir: &Path) -> PathBuf {
