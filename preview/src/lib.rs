@@ -10,12 +10,14 @@
 //!   (compute-expanded index buffer + indirect indexed draw).
 //! - [`viewer`] is the windowed viewer (winit): a [`fly`] camera, keys for τ and the modes,
 //!   frames drawn by the same renderer and blitted into a swapchain.
+//! - [`coverage`] counts the pixels coarse cuts cover against full detail.
 //! - [`verify`] proves a file: GPU selection equals the CPU reference for many cameras, and the
 //!   drawn cut of a closed mesh shows no back face from outside.
 #![deny(missing_docs)]
 
 pub mod bench;
 pub mod camera;
+pub mod coverage;
 pub mod exposed;
 pub mod fly;
 pub mod gpu_types;

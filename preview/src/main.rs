@@ -8,6 +8,7 @@ use anyhow::{bail, Context as _, Result};
 use clap::Parser;
 use mres_format::MresFile;
 use preview::camera::Camera;
+use preview::coverage::{coverage, CoverageRow};
 use preview::gpu_types::FLAG_FRUSTUM_CULL;
 use preview::image::write_png;
 use preview::scene::SceneData;
@@ -53,9 +54,15 @@ struct Args {
     /// Cameras of the selection check (each with 4 thresholds: 0.25, 1, 4, 16 px).
     #[arg(long, default_value_t = 200)]
     cameras: usize,
-    /// Cameras of the crack test (each with 3 thresholds: 0.5, 2, 8 px).
+    /// Cameras of the crack test (each with 3 thresholds: 0.5, 2, 8 px), and of --coverage.
     #[arg(long, default_value_t = 16)]
     crack_cameras: usize,
+    /// How much of the model's projected area the cuts keep: renders from --crack-cameras
+    /// cameras at three times the bounding radius, at tau 0 and at 1, 4, 16, 64, 256, 1024 px,
+    /// and prints per tau the mean triangles drawn and the mean of the model pixels over those
+    /// of the tau 0 render (occlusion included; `mres inspect` gives uniform cuts' surface area).
+    #[arg(long)]
+    coverage: bool,
     /// Write the verify report (and device facts) as JSON.
     #[arg(long, value_name = "JSON")]
     report: Option<PathBuf>,
@@ -166,8 +173,8 @@ fn path_choice(arg: PathArg) -> DrawPath {
 
 /// `preview FILE.mres` without `--headless`: the window.
 fn run_window(args: &Args) -> Result<ExitCode> {
-    if args.verify || args.bench {
-        bail!("--verify and --bench render offscreen: add --headless");
+    if args.verify || args.bench || args.coverage {
+        bail!("--verify, --bench and --coverage render offscreen: add --headless");
     }
     if !preview::viewer::display_available() {
         bail!("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): add --headless to render offscreen (with --out, --verify or --bench)");
@@ -321,8 +328,8 @@ fn run(args: Args) -> Result<ExitCode> {
     if !args.headless {
         return run_window(&args);
     }
-    if !args.verify && args.out.is_none() && !args.bench {
-        bail!("nothing to do: give --verify, --out PNG and/or --bench");
+    if !args.verify && args.out.is_none() && !args.bench && !args.coverage {
+        bail!("nothing to do: give --verify, --out PNG, --bench and/or --coverage");
     }
     if !(1..=100).contains(&args.grid) {
         bail!("--grid {}: must be 1..=100", args.grid);
@@ -455,6 +462,19 @@ fn run(args: Args) -> Result<ExitCode> {
             frame.clusters,
             frame.triangles
         );
+    }
+
+    if args.coverage {
+        let seed = VerifyOptions::default().seed;
+        let rows = coverage(&mut renderer, &scene, args.crack_cameras, (width, height), seed)?;
+        println!(
+            "coverage ({} cameras at 3x the bounding radius, {width}x{height}): model pixels over the tau 0 render's, mean over the cameras",
+            args.crack_cameras
+        );
+        for r in &rows {
+            println!("  tau {:>6} px: {:>12.0} triangles, {:6.1}% covered", r.tau, r.triangles, r.covered * 100.0);
+        }
+        report_json["coverage"] = json!(rows.iter().map(CoverageRow::to_json).collect::<Vec<_>>());
     }
 
     if args.verify {

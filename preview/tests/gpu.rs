@@ -611,3 +611,26 @@ fn a_truncated_scene_file_fails_naming_it() {
     assert!(stderr.contains(&path.display().to_string()) && stderr.contains("invalid scene file"), "{stderr}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn coverage_counts_the_pixels_a_coarse_cut_keeps() {
+    let Some((device, counts)) = device("coverage") else { return };
+    // The cube's root is the same box, so it covers what full detail covers; a root shrunk to
+    // half the size covers about a quarter.
+    let mut shrunk = cube_dag(8);
+    for q in &mut shrunk.clusters.last_mut().unwrap().positions {
+        *q = q.map(|x| 2 + x / 2);
+    }
+    for (dag, lo, hi) in [(cube_dag(8), 0.98, 1.02), (shrunk, 0.1, 0.5)] {
+        let file = MresFile::parse(write_mres(&dag, 3).expect("write")).expect("parse");
+        let scene = SceneData::from_file(&file).unwrap();
+        let mut renderer = Renderer::new(&device, &scene, RendererOptions::default()).unwrap();
+        let rows = preview::coverage::coverage(&mut renderer, &scene, 6, (128, 128), 7).unwrap();
+        let (full, coarsest) = (&rows[0], rows.last().unwrap());
+        assert_eq!((full.tau, full.covered, full.triangles), (0.0, 1.0, 768.0));
+        assert_eq!(coarsest.triangles, 12.0, "the root alone at {} px", coarsest.tau);
+        assert!((lo..hi).contains(&coarsest.covered), "covered {} not in {lo}..{hi}", coarsest.covered);
+    }
+    drop(device);
+    assert_silent(&counts);
+}
