@@ -5,13 +5,14 @@
 //! Every vertex of an upper level is a vertex of the welded mesh, so the grown parts' vertices
 //! are made before the build: each vertex of a small open part gets [`RUNGS`] copies, rung `r`
 //! scaled by 2^(r/2) about its part's area centroid (so one rung doubles a part's area, what a
-//! level that halves its triangles by removing half the cards loses). A group moves each part
-//! it may grow (no vertex shared with another group) up the same number of rungs. The grown
+//! level that halves its triangles by removing half the cards loses). A group moves the parts
+//! it may grow (no vertex shared with another group) up the whole rungs that stay below its
+//! input's open-part area, and some of them one rung more, to come nearest to it. The grown
 //! triangles are measured against the original surface like any other, so the stored errors
 //! stay honest: they grow with the dilation, which is the price of the coverage.
 //! (Nanite's "preserve area" grows open borders instead; meshoptimizer has no such option.)
 
-use crate::weld::{Ladder, WeldedMesh};
+use crate::weld::{Ladder, WeldedMesh, NO_PART as NONE};
 use mres_geom::edges::{edge_ends, edge_key};
 use mres_geom::parts::UnionFind;
 
@@ -20,8 +21,6 @@ pub const RUNGS: u8 = 8;
 
 /// Most triangles of a part that grows: foliage cards and leaves, not walls or terrain.
 pub const SMALL_PART: usize = 64;
-
-use crate::weld::NO_PART as NONE;
 
 /// `mesh` with a [`Ladder`]: copies of the vertices of its small open parts appended, each
 /// with a position id of its own, on the mesh's grid. A grown part may reach beyond the
