@@ -450,6 +450,8 @@ impl ShardContext<'_> {
         output: &O,
     ) -> Result<Cell<O::Cluster>, BakeError> {
         let (merged, clusters) = self.merge(tops);
+        // The merged top clusters' small open parts grow on from where the shards left them.
+        let merged = if self.settings.preserve_area { with_ladder(merged) } else { merged };
         self.levels(&merged, clusters, level, to_root, output)
     }
 

@@ -80,17 +80,21 @@ fn foliage_keeps_its_area_with_preserve_area() {
     // so that every cut keeps about the card area of full detail; without it the coarsest cut
     // keeps a few percent. Both validate (crack-free, honest errors, one root).
     let cuts = [0.05, 0.2, f32::MAX];
-    let area = |preserve_area: bool| {
-        let settings = BakeSettings { preserve_area, ..BakeSettings::default() };
+    let area = |preserve_area: bool, shard_triangles: u64| {
+        let settings = BakeSettings { preserve_area, shard_triangles, ..BakeSettings::default() };
         let bytes = bake_source(generate::cards(3000), &settings, &|_| {}).expect("bake").bytes;
         let (file, report) = check(bytes, 200);
         assert!(report.honesty.worst_ratio <= 1.0, "honesty {}", report.honesty.worst);
         mres_cli::inspect::cut_area_fractions(&file, &cuts).expect("pages decode")
     };
-    let (grown, plain) = (area(true), area(false));
+    let whole = BakeSettings::default().shard_triangles;
+    let plain = area(false, whole);
     assert!(plain[2] < 0.1, "without preserve_area the coarsest cut keeps {plain:?}");
-    for (cut, kept) in cuts.iter().zip(&grown) {
-        assert!((0.6..1.6).contains(kept), "cut at {cut}: area kept {kept} (all: {grown:?})");
+    // Whole, and in shards of 2,000 triangles (the merged stages grow the parts on).
+    for grown in [area(true, whole), area(true, 2000)] {
+        for (cut, kept) in cuts.iter().zip(&grown) {
+            assert!((0.6..1.6).contains(kept), "cut at {cut}: area kept {kept} (all: {grown:?})");
+        }
     }
 }
 
