@@ -12,15 +12,25 @@
 //! stay honest: they grow with the dilation, which is the price of the coverage.
 //! (Nanite's "preserve area" grows open borders instead; meshoptimizer has no such option.)
 
+use crate::settings::BakeSettings;
 use crate::weld::{Ladder, WeldedMesh, NO_PART as NONE};
 use mres_geom::edges::{edge_ends, edge_key};
-use mres_geom::parts::UnionFind;
+use mres_geom::parts::triangle_area;
 
 /// Copies per vertex of a small open part: up to 2^(RUNGS/2) = 16 × its size, 256 × its area.
 pub const RUNGS: u8 = 8;
 
 /// Most triangles of a part that grows: foliage cards and leaves, not walls or terrain.
 pub const SMALL_PART: usize = 64;
+
+/// `mesh` ready for the levels: with a [`Ladder`] where `settings.preserve_area` asks for one.
+pub fn prepare(mesh: WeldedMesh, settings: &BakeSettings) -> WeldedMesh {
+    if settings.preserve_area {
+        with_ladder(mesh)
+    } else {
+        mesh
+    }
+}
 
 /// `mesh` with a [`Ladder`]: copies of the vertices of its small open parts appended, each
 /// with a position id of its own, on the mesh's grid. A grown part may reach beyond the
@@ -31,16 +41,9 @@ pub fn with_ladder(mut mesh: WeldedMesh) -> WeldedMesh {
     let part: Vec<u32> = (0..vertices).map(|v| growing.part[mesh.position_ids[v] as usize]).collect();
     let copies = part.iter().filter(|&&p| p != NONE).count() * RUNGS as usize;
     reserve(&mut mesh, copies);
-    let mut ladder = Ladder {
-        rung: Vec::with_capacity(vertices + copies),
-        base: Vec::with_capacity(vertices + copies),
-        part,
-        first_copy: vec![NONE; vertices],
-        level0_positions: mesh.position_count,
-    };
-    ladder.part.reserve(copies);
-    ladder.rung.resize(vertices, 0);
-    ladder.base.extend(0..vertices as u32);
+    let mut base = Vec::with_capacity(vertices + copies);
+    base.extend(0..vertices as u32);
+    let mut ladder = Ladder { base, part, first_copy: vec![NONE; vertices], level0_positions: mesh.position_count };
     // A copy's position id: one per (position, rung), so that seam copies stay joined.
     let mut position_copy = vec![NONE; mesh.position_count];
     for v in 0..vertices {
@@ -60,8 +63,6 @@ pub fn with_ladder(mut mesh: WeldedMesh) -> WeldedMesh {
             let grown = [0, 1, 2].map(|k| (centre[k] + (f64::from(mesh.positions[v][k]) - centre[k]) * scale) as f32);
             let q = mesh.grid.quantize(grown);
             copy_vertex(&mut mesh, v, q, position_copy[p] + u32::from(r) - 1);
-            ladder.part.push(part);
-            ladder.rung.push(r);
             ladder.base.push(v as u32);
         }
     }
@@ -111,12 +112,8 @@ struct Growing {
 /// (one used by a single triangle).
 fn growing_parts(mesh: &WeldedMesh) -> Growing {
     let id = |v: u32| mesh.position_ids[v as usize];
-    let mut sets = UnionFind::new(mesh.position_count);
-    for t in mesh.indices.chunks_exact(3) {
-        sets.union(id(t[0]), id(t[1]));
-        sets.union(id(t[0]), id(t[2]));
-    }
     let n = mesh.position_count;
+    let mut sets = mesh.part_sets(n);
     let (mut triangles, mut open) = (vec![0usize; n], vec![false; n]);
     let (mut area, mut moment) = (vec![0.0f64; n], vec![[0.0f64; 3]; n]);
     for t in mesh.indices.chunks_exact(3) {
@@ -145,13 +142,6 @@ fn growing_parts(mesh: &WeldedMesh) -> Growing {
     Growing { part, centre }
 }
 
-/// Area of a triangle.
-fn triangle_area(p: [[f64; 3]; 3]) -> f64 {
-    let (u, w) = ([0, 1, 2].map(|k| p[1][k] - p[0][k]), [0, 1, 2].map(|k| p[2][k] - p[0][k]));
-    let c = [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]];
-    0.5 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
-}
-
 /// Grows the small open parts of a group's simplification `out` (welded ids; `needed`, its
 /// edges that need an open-border mark, follows) so that the open-part area is about that of
 /// its `input` again. Only parts with no `locked` vertex move (a locked vertex may be another
@@ -166,21 +156,18 @@ pub fn grow(
 ) -> bool {
     let Some(ladder) = &mesh.ladder else { return false };
     // A part with a locked vertex in the output stays as it is.
-    let mut fixed: Vec<u32> = out
-        .iter()
-        .filter(|&&v| ladder.part[v as usize] != NONE && locked(v))
-        .map(|&v| ladder.part[v as usize])
-        .collect();
+    let mut fixed: Vec<u32> =
+        out.iter().filter(|&&v| ladder.part_of(v) != NONE && locked(v)).map(|&v| ladder.part_of(v)).collect();
     fixed.sort_unstable();
     fixed.dedup();
     let moves = |p: u32| p != NONE && fixed.binary_search(&p).is_err();
-    let climbs = climbs(mesh, input, out, moves);
+    let climbs = climbs(mesh, ladder, input, out, moves);
     if climbs.is_empty() {
         return false;
     }
     let climb = |v: u32| {
-        let by = climbs.binary_search_by_key(&ladder.part[v as usize], |c| c.0).ok()?;
-        let to = (i32::from(ladder.rung[v as usize]) + climbs[by].1).clamp(0, i32::from(RUNGS)) as u8;
+        let by = climbs.binary_search_by_key(&ladder.part_of(v), |c| c.0).ok()?;
+        let to = (i32::from(ladder.rung_of(v)) + climbs[by].1).clamp(0, i32::from(RUNGS)) as u8;
         Some(ladder.at(v, to))
     };
     move_up(mesh, out, needed, climb);
@@ -191,10 +178,15 @@ pub fn grow(
 /// open-part area of `out` to be about that of `input` (one rung doubles a part's area): all
 /// of them the whole rungs that stay below the target, then one more for as many parts (in
 /// part order) as bring the sum nearest to it. Empty for none.
-fn climbs(mesh: &WeldedMesh, input: &[u32], out: &[u32], moves: impl Fn(u32) -> bool) -> Vec<(u32, i32)> {
-    let Some(ladder) = &mesh.ladder else { return Vec::new() };
-    let part = |t: &[u32]| ladder.part[t[0] as usize];
-    let area_of = |t: &[u32]| triangle_area([0, 1, 2].map(|k| mesh.positions[t[k] as usize].map(f64::from)));
+fn climbs(
+    mesh: &WeldedMesh,
+    ladder: &Ladder,
+    input: &[u32],
+    out: &[u32],
+    moves: impl Fn(u32) -> bool,
+) -> Vec<(u32, i32)> {
+    let part = |t: &[u32]| ladder.part_of(t[0]);
+    let area_of = |t: &[u32]| area_of(mesh, t);
     let before: f64 = input.chunks_exact(3).filter(|t| part(t) != NONE).map(area_of).sum();
     let mut areas: Vec<(u32, f64)> =
         out.chunks_exact(3).filter(|t| part(t) != NONE).map(|t| (part(t), area_of(t))).collect();
@@ -224,6 +216,11 @@ fn climbs(mesh: &WeldedMesh, input: &[u32], out: &[u32], moves: impl Fn(u32) -> 
         })
         .filter(|c| c.1 != 0)
         .collect()
+}
+
+/// Area of triangle `t` (welded ids) of `mesh`.
+fn area_of(mesh: &WeldedMesh, t: &[u32]) -> f64 {
+    triangle_area([0, 1, 2].map(|k| mesh.positions[t[k] as usize].map(f64::from)))
 }
 
 /// Replaces each vertex of `out` for which `moved` names another by it, and the edges of
@@ -267,10 +264,7 @@ mod tests {
     }
 
     fn area(mesh: &WeldedMesh, indices: &[u32]) -> f64 {
-        indices
-            .chunks_exact(3)
-            .map(|t| triangle_area([0, 1, 2].map(|k| mesh.positions[t[k] as usize].map(f64::from))))
-            .sum()
+        indices.chunks_exact(3).map(|t| area_of(mesh, t)).sum()
     }
 
     #[test]

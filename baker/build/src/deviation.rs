@@ -21,7 +21,7 @@ use crate::simplify::{simplify_group, Locks, Simplified};
 use crate::weld::WeldedMesh;
 use mres_geom::bvh::{Bvh, Triangle};
 use mres_geom::edges::edge_key;
-use mres_geom::parts::{diagonals, UnionFind};
+use mres_geom::parts::diagonals;
 use mres_geom::walk::{Surface, STEPS};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
@@ -51,11 +51,7 @@ const OUTLIER_RETRIES: usize = 3;
 pub fn part_sizes(mesh: &WeldedMesh) -> Vec<f32> {
     let id = |v: u32| mesh.position_ids[v as usize];
     let level0 = mesh.ladder.as_ref().map_or(mesh.position_count, |l| l.level0_positions);
-    let mut sets = UnionFind::new(level0);
-    for t in mesh.indices.chunks_exact(3) {
-        sets.union(id(t[0]), id(t[1]));
-        sets.union(id(t[0]), id(t[2]));
-    }
+    let mut sets = mesh.part_sets(level0);
     let points = mesh.positions.iter().enumerate().map(|(v, p)| (id(v as u32), p.map(f64::from)));
     let diagonal = diagonals(&mut sets, points.filter(|&(p, _)| (p as usize) < level0));
     let mut sizes: Vec<f32> = (0..level0 as u32).map(|p| diagonal[sets.find(p) as usize] as f32).collect();

@@ -27,7 +27,7 @@
 //! mesh's build. Output is deterministic: cells, spill order and shard results depend only on
 //! the input and the settings, never on the thread count.
 
-use crate::area::with_ladder;
+use crate::area;
 use crate::dag::{
     BuildStats, BuiltCluster, BuiltDag, Cell, Collected, Converted, DagOutput, Frame, StageClock, TopCluster,
 };
@@ -362,7 +362,7 @@ impl ShardContext<'_> {
         welded.multi_material = self.multi_material;
         drop(mesh);
         let (welded, order) = numbered_in_triangle_order(welded);
-        let welded = if self.settings.preserve_area { with_ladder(welded) } else { welded };
+        let welded = area::prepare(welded, self.settings);
         // The shard's odd edges that are odd in the whole mesh too are open; the rest are
         // shard borders (`Builder` locks them).
         let mut point = vec![[0i32; 3]; welded.position_count];
@@ -451,7 +451,7 @@ impl ShardContext<'_> {
     ) -> Result<Cell<O::Cluster>, BakeError> {
         let (merged, clusters) = self.merge(tops);
         // The merged top clusters' small open parts grow on from where the shards left them.
-        let merged = if self.settings.preserve_area { with_ladder(merged) } else { merged };
+        let merged = area::prepare(merged, self.settings);
         self.levels(&merged, clusters, level, to_root, output)
     }
 

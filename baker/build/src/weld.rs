@@ -4,6 +4,7 @@
 
 use crate::settings::BakeSettings;
 use mres_format::{Grid, UvQuant};
+use mres_geom::parts::UnionFind;
 use mres_import::SourceMesh;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
@@ -48,10 +49,8 @@ pub(crate) const NO_PART: u32 = u32::MAX;
 /// and uses them; it is kept here, with the mesh it belongs to).
 #[derive(Clone, Debug, Default)]
 pub struct Ladder {
-    /// Per welded vertex: its part (an id shared by the part's vertices and copies), or NO_PART.
+    /// Per level-0 vertex: its part (an id shared by the part's vertices), or NO_PART.
     pub(crate) part: Vec<u32>,
-    /// Per welded vertex: its rung, 0 for the level-0 vertices.
-    pub(crate) rung: Vec<u8>,
     /// Per welded vertex: the level-0 vertex it is a copy of (itself at rung 0).
     pub(crate) base: Vec<u32>,
     /// Per level-0 vertex of a part that grows: its copy at rung 1 (rung r at `+ r - 1`).
@@ -61,6 +60,21 @@ pub struct Ladder {
 }
 
 impl Ladder {
+    /// The part of welded vertex `v` (a copy's is its level-0 vertex's), or NO_PART.
+    pub(crate) fn part_of(&self, v: u32) -> u32 {
+        self.part[self.base[v as usize] as usize]
+    }
+
+    /// The rung of welded vertex `v`: 0 for a level-0 vertex.
+    pub(crate) fn rung_of(&self, v: u32) -> u8 {
+        let b = self.base[v as usize];
+        if b == v {
+            0
+        } else {
+            (v - self.first_copy[b as usize] + 1) as u8
+        }
+    }
+
     /// The copy of `v`'s level-0 vertex at rung `r`.
     pub(crate) fn at(&self, v: u32, r: u8) -> u32 {
         let b = self.base[v as usize];
@@ -274,6 +288,18 @@ fn add_triangles(out: &mut WeldedMesh, triangles: usize, vertex_of: impl Fn(usiz
 }
 
 impl WeldedMesh {
+    /// The connected parts of its triangles, by position id, over the first `positions` ids
+    /// (a triangle's corners joined).
+    pub fn part_sets(&self, positions: usize) -> UnionFind {
+        let id = |v: u32| self.position_ids[v as usize];
+        let mut sets = UnionFind::new(positions);
+        for t in self.indices.chunks_exact(3) {
+            sets.union(id(t[0]), id(t[1]));
+            sets.union(id(t[0]), id(t[2]));
+        }
+        sets
+    }
+
     /// The same mesh with its vertices and position ids numbered by first use in the
     /// triangle order `order` (a permutation of its triangles; the triangles themselves keep
     /// their places). With `order` the Morton order of [`crate::partition::triangle_order`],

@@ -1,7 +1,7 @@
 //! A mesh of at most `shard_triangles` triangles is built whole: welded on a grid over its
 //! bounds, cut into level-0 clusters, and built level by level to the root.
 
-use crate::area::with_ladder;
+use crate::area;
 use crate::dag::{BuildStats, BuiltDag, Collected, Converted, DagOutput, Frame, StageClock};
 use crate::deviation::{part_sizes, Original};
 use crate::error::BakeError;
@@ -33,7 +33,7 @@ pub fn build_whole<O: DagOutput>(
     // The whole level-0 surface that errors are measured against, made beside the clusters.
     let measured = settings.error_bound == ErrorBound::Measured;
     let (welded, order) = numbered_in_triangle_order(welded);
-    let welded = if settings.preserve_area { with_ladder(welded) } else { welded };
+    let welded = area::prepare(welded, settings);
     // The mesh's edges, sorted once: its open edges for the clusters, its locked positions.
     let edges = Level0Edges::new(&welded);
     // The part sizes and the first level's groups (METIS) are serial passes: beside the

@@ -4,6 +4,7 @@
 
 use crate::batch::level0_triangles;
 use mres_format::{select, MresError, MresFile, FLAG_MATERIALS, FLAG_NORMALS, FLAG_UVS, NO_GROUP};
+use mres_geom::parts::triangle_area;
 use serde::Serialize;
 use std::fmt::Write as _;
 
@@ -162,16 +163,7 @@ fn verify_and_bound(file: &MresFile) -> Result<Scan, MresError> {
 /// Surface area of a decoded cluster, object units.
 fn area(file: &MresFile, cluster: &mres_format::DecodedCluster) -> f64 {
     let p: Vec<[f64; 3]> = cluster.positions.iter().map(|q| file.header.grid.decode(*q).map(f64::from)).collect();
-    cluster
-        .indices
-        .chunks_exact(3)
-        .map(|t| {
-            let (a, b, c) = (p[t[0] as usize], p[t[1] as usize], p[t[2] as usize]);
-            let (u, v) = ([0, 1, 2].map(|k| b[k] - a[k]), [0, 1, 2].map(|k| c[k] - a[k]));
-            let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-            0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
-        })
-        .sum()
+    cluster.indices.chunks_exact(3).map(|t| triangle_area([0, 1, 2].map(|k| p[t[k] as usize]))).sum()
 }
 
 /// The surface area of the uniform cut at each of `errors` (object units) over the level-0

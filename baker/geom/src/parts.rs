@@ -62,6 +62,13 @@ pub fn diagonals(sets: &mut UnionFind, points: impl Iterator<Item = (u32, [f64; 
     lo.iter().zip(&hi).map(|(l, h)| (0..3).map(|k| (h[k] - l[k]).max(0.0).powi(2)).sum::<f64>().sqrt()).collect()
 }
 
+/// Area of the triangle with corners `p`.
+pub fn triangle_area(p: [[f64; 3]; 3]) -> f64 {
+    let (u, w) = ([0, 1, 2].map(|k| p[1][k] - p[0][k]), [0, 1, 2].map(|k| p[2][k] - p[0][k]));
+    let c = [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]];
+    0.5 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
