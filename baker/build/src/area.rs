@@ -12,7 +12,7 @@
 //! stay honest: they grow with the dilation, which is the price of the coverage.
 //! (Nanite's "preserve area" grows open borders instead; meshoptimizer has no such option.)
 
-use crate::settings::BakeSettings;
+use crate::settings::{BakeSettings, PreserveArea};
 use crate::weld::{Ladder, WeldedMesh, NO_PART as NONE};
 use mres_geom::edges::{edge_ends, edge_key};
 use mres_geom::parts::triangle_area;
@@ -23,20 +23,42 @@ pub const RUNGS: u8 = 8;
 /// Most triangles of a part that grows: foliage cards and leaves, not walls or terrain.
 pub const SMALL_PART: usize = 64;
 
-/// `mesh` ready for the levels: with a [`Ladder`] where `settings.preserve_area` asks for one.
-pub fn prepare(mesh: WeldedMesh, settings: &BakeSettings) -> WeldedMesh {
-    if settings.preserve_area {
-        with_ladder(mesh)
+/// With `preserve_area = "auto"`, the share of a mesh's surface area in small open parts from
+/// which they grow: a card field or a tree's leaves (90-100 %), not a scene with a few
+/// decals or open sheets (of the 23 inputs of docs/BENCHMARKS.md the card fields have 100 %,
+/// the terrarium 10 %, the rooms 3.9 %, the pirate 1.5 %, the rest none).
+pub const AUTO_SHARE: f64 = 0.5;
+
+/// `mesh` ready for the levels: with a [`Ladder`] where `settings.preserve_area` asks for one
+/// (for `Auto`, where its small open parts hold at least [`AUTO_SHARE`] of its area).
+/// `edges`: the mesh's edge keys, sorted, where the caller has them (else they are made here).
+pub fn prepare(mesh: WeldedMesh, settings: &BakeSettings, edges: Option<&[u64]>) -> WeldedMesh {
+    if settings.preserve_area == PreserveArea::Off {
+        return mesh;
+    }
+    let made;
+    let edges = match edges {
+        Some(e) => e,
+        None => {
+            made = mres_geom::edges::sorted_edge_keys(&mesh.indices, |v| mesh.position_ids[v as usize]);
+            &made[..]
+        }
+    };
+    let growing = growing_parts(&mesh, edges);
+    let share = growing.area / growing.total_area.max(f64::MIN_POSITIVE);
+    let grow = settings.preserve_area == PreserveArea::On || share >= AUTO_SHARE;
+    tracing::info!(share, grow, setting = ?settings.preserve_area, "small open parts (preserve_area)");
+    if grow {
+        with_ladder(mesh, &growing)
     } else {
         mesh
     }
 }
 
-/// `mesh` with a [`Ladder`]: copies of the vertices of its small open parts appended, each
+/// `mesh` with a [`Ladder`] for its `growing` parts: copies of their vertices appended, each
 /// with a position id of its own, on the mesh's grid. A grown part may reach beyond the
 /// mesh's bounds: grid coordinates are any i32 (docs/FORMAT.md, cluster positions).
-pub fn with_ladder(mut mesh: WeldedMesh) -> WeldedMesh {
-    let growing = growing_parts(&mesh);
+fn with_ladder(mut mesh: WeldedMesh, growing: &Growing) -> WeldedMesh {
     let vertices = mesh.positions.len();
     let part: Vec<u32> = (0..vertices).map(|v| growing.part[mesh.position_ids[v] as usize]).collect();
     let copies = part.iter().filter(|&&p| p != NONE).count() * RUNGS as usize;
@@ -102,17 +124,24 @@ fn copy_vertex(mesh: &mut WeldedMesh, v: usize, q: [i32; 3], id: u32) {
 }
 
 /// The parts that grow: per position id, its part's id or NONE, and per part id its area
-/// centroid.
+/// centroid; their area and the mesh's.
 struct Growing {
     part: Vec<u32>,
     centre: Vec<[f64; 3]>,
+    area: f64,
+    total_area: f64,
 }
 
 /// The connected parts (by position) of at most [`SMALL_PART`] triangles with an open edge
-/// (one used by a single triangle).
-fn growing_parts(mesh: &WeldedMesh) -> Growing {
+/// (one used by a single triangle); `edges` are the mesh's edge keys, sorted.
+fn growing_parts(mesh: &WeldedMesh, edges: &[u64]) -> Growing {
     let id = |v: u32| mesh.position_ids[v as usize];
     let n = mesh.position_count;
+    let once = |r: &&[u64]| r.len() == 1;
+    if !edges.chunk_by(|a, b| a == b).any(|r| once(&r)) {
+        // Closed: no part grows (most meshes; the passes below would cost a scan's bake 1-4 %).
+        return Growing { part: vec![NONE; n], centre: Vec::new(), area: 0.0, total_area: 1.0 };
+    }
     let mut sets = mesh.part_sets(n);
     let (mut triangles, mut open) = (vec![0usize; n], vec![false; n]);
     let (mut area, mut moment) = (vec![0.0f64; n], vec![[0.0f64; 3]; n]);
@@ -126,20 +155,20 @@ fn growing_parts(mesh: &WeldedMesh) -> Growing {
             moment[root][k] += a * (p[0][k] + p[1][k] + p[2][k]) / 3.0;
         }
     }
-    let keys = mres_geom::edges::sorted_edge_keys(&mesh.indices, id);
-    for run in keys.chunk_by(|a, b| a == b).filter(|r| r.len() == 1) {
+    for run in edges.chunk_by(|a, b| a == b).filter(once) {
         open[sets.find(edge_ends(run[0])[0]) as usize] = true;
     }
     let mut ids = vec![NONE; n];
-    let mut centre = Vec::new();
+    let (mut centre, mut growing_area) = (Vec::new(), 0.0);
     for root in 0..n {
         if open[root] && triangles[root] <= SMALL_PART && area[root] > 0.0 {
             ids[root] = centre.len() as u32;
             centre.push(moment[root].map(|m| m / area[root]));
+            growing_area += area[root];
         }
     }
     let part = (0..n as u32).map(|p| ids[sets.find(p) as usize]).collect();
-    Growing { part, centre }
+    Growing { part, centre, area: growing_area, total_area: area.iter().sum() }
 }
 
 /// Grows the small open parts of a group's simplification `out` (welded ids; `needed`, its
@@ -247,7 +276,7 @@ fn move_up(mesh: &WeldedMesh, out: &mut [u32], needed: &mut [u64], moved: impl F
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::settings::BakeSettings;
+    use crate::settings::{BakeSettings, PreserveArea};
     use crate::weld::weld;
     use mres_import::SourceMesh;
 
@@ -260,7 +289,34 @@ mod tests {
             positions.extend([[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x + 1.0, 1.0, 0.0], [x, 1.0, 0.0]]);
             indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
         }
-        with_ladder(weld(&SourceMesh::positions_only(positions, indices), &BakeSettings::default()).unwrap())
+        let settings = BakeSettings { preserve_area: PreserveArea::On, ..BakeSettings::default() };
+        prepare(weld(&SourceMesh::positions_only(positions, indices), &settings).unwrap(), &settings, None)
+    }
+
+    /// A closed box of side `side` at the origin (12 triangles) and one unit card beside it.
+    fn box_and_card(side: f32) -> SourceMesh {
+        let corner = |i: u32| [0, 1, 2].map(|k| if i >> k & 1 == 1 { side } else { 0.0 });
+        let mut positions: Vec<[f32; 3]> = (0..8).map(corner).collect();
+        let mut indices = vec![
+            0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5,
+        ];
+        positions.extend([[-3.0, 0.0, 0.0], [-2.0, 0.0, 0.0], [-2.0, 1.0, 0.0], [-3.0, 1.0, 0.0]]);
+        indices.extend([8, 9, 10, 8, 10, 11]);
+        SourceMesh::positions_only(positions, indices)
+    }
+
+    #[test]
+    fn auto_grows_only_where_small_open_parts_hold_most_of_the_area() {
+        let grows = |side: f32, preserve_area: PreserveArea| {
+            let settings = BakeSettings { preserve_area, ..BakeSettings::default() };
+            prepare(weld(&box_and_card(side), &settings).unwrap(), &settings, None).ladder.is_some()
+        };
+        // The card (area 1) beside a box of area 6 side²: most of the area at side 0.2 (0.24),
+        // a small share at side 1 (6).
+        assert!(grows(0.2, PreserveArea::Auto));
+        assert!(!grows(1.0, PreserveArea::Auto));
+        assert!(grows(1.0, PreserveArea::On));
+        assert!(!grows(0.2, PreserveArea::Off));
     }
 
     fn area(mesh: &WeldedMesh, indices: &[u32]) -> f64 {

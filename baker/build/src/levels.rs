@@ -647,6 +647,11 @@ impl Level0Edges {
         Level0Edges { keys: sorted_edge_keys(&mesh.indices, |v| mesh.position_ids[v as usize]) }
     }
 
+    /// The edge keys, sorted (an edge used n times n times).
+    pub fn sorted(&self) -> &[u64] {
+        &self.keys
+    }
+
     /// The edges used an odd number of times (the open ones), sorted: what the level-0
     /// clusters mark (see [`crate::open::mark`]).
     pub fn odd(&self) -> Vec<u64> {

@@ -27,6 +27,52 @@ pub enum PageEncoding {
     Layout,
 }
 
+/// Whether foliage keeps its area ([`BakeSettings::preserve_area`]): `false`, `true` or
+/// `"auto"` in `pipeline.toml` (`false` and `true` are how it was written before `"auto"`, so
+/// that the settings of a cache key read as they did).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PreserveArea {
+    /// Never: every part simplifies as it is.
+    Off,
+    /// Always: the small open parts a group keeps grow (see `area.rs`).
+    On,
+    /// Where small open parts hold at least [`crate::area::AUTO_SHARE`] of the mesh's surface
+    /// area (a card field, a tree's leaves), as `On`; elsewhere as `Off`.
+    Auto,
+}
+
+impl Serialize for PreserveArea {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            PreserveArea::Off => s.serialize_bool(false),
+            PreserveArea::On => s.serialize_bool(true),
+            PreserveArea::Auto => s.serialize_str("auto"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for PreserveArea {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Written;
+        impl serde::de::Visitor<'_> for Written {
+            type Value = PreserveArea;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("true, false or \"auto\"")
+            }
+            fn visit_bool<E: serde::de::Error>(self, on: bool) -> Result<PreserveArea, E> {
+                Ok(if on { PreserveArea::On } else { PreserveArea::Off })
+            }
+            fn visit_str<E: serde::de::Error>(self, word: &str) -> Result<PreserveArea, E> {
+                match word {
+                    "auto" => Ok(PreserveArea::Auto),
+                    _ => Err(E::invalid_value(serde::de::Unexpected::Str(word), &self)),
+                }
+            }
+        }
+        d.deserialize_any(Written)
+    }
+}
+
 /// Settings of one bake. Each field says which step it feeds; [`BakeSettings::default`]
 /// gives the defaults and why.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -73,8 +119,9 @@ pub struct BakeSettings {
     /// Simplify: foliage keeps its area. Where a group removes small open parts (cards,
     /// leaves), the open parts it keeps grow about their centres so that the group's
     /// open-part area stays about the same (docs/INVARIANTS.md §4). The stored errors grow
-    /// with the dilation, so it is for meshes whose coverage matters more than their shape.
-    pub preserve_area: bool,
+    /// with the dilation, so it is for meshes whose coverage matters more than their shape:
+    /// `On` for those, `Auto` to let each mesh's share of small open parts decide.
+    pub preserve_area: PreserveArea,
 }
 
 impl Default for BakeSettings {
@@ -112,7 +159,7 @@ impl Default for BakeSettings {
             page_encoding: PageEncoding::Compact,
             // Off: growing parts moves them off the surface (larger errors, more triangles at
             // a given error); foliage assets turn it on.
-            preserve_area: false,
+            preserve_area: PreserveArea::Off,
         }
     }
 }

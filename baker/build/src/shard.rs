@@ -362,7 +362,8 @@ impl ShardContext<'_> {
         welded.multi_material = self.multi_material;
         drop(mesh);
         let (welded, order) = numbered_in_triangle_order(welded);
-        let welded = area::prepare(welded, self.settings);
+        let edges = Level0Edges::new(&welded);
+        let welded = area::prepare(welded, self.settings, Some(edges.sorted()));
         // The shard's odd edges that are odd in the whole mesh too are open; the rest are
         // shard borders (`Builder` locks them).
         let mut point = vec![[0i32; 3]; welded.position_count];
@@ -370,7 +371,6 @@ impl ShardContext<'_> {
             point[p as usize] = welded.grid_positions[v];
         }
         let q = |p: u32| point[p as usize];
-        let edges = Level0Edges::new(&welded);
         let open: Vec<u64> = edges
             .odd()
             .into_iter()
@@ -451,7 +451,7 @@ impl ShardContext<'_> {
     ) -> Result<Cell<O::Cluster>, BakeError> {
         let (merged, clusters) = self.merge(tops);
         // The merged top clusters' small open parts grow on from where the shards left them.
-        let merged = area::prepare(merged, self.settings);
+        let merged = area::prepare(merged, self.settings, None);
         self.levels(&merged, clusters, level, to_root, output)
     }
 

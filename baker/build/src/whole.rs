@@ -33,9 +33,10 @@ pub fn build_whole<O: DagOutput>(
     // The whole level-0 surface that errors are measured against, made beside the clusters.
     let measured = settings.error_bound == ErrorBound::Measured;
     let (welded, order) = numbered_in_triangle_order(welded);
-    let welded = area::prepare(welded, settings);
-    // The mesh's edges, sorted once: its open edges for the clusters, its locked positions.
+    // The mesh's edges, sorted once: its open edges for the clusters, its locked positions,
+    // its open parts (a ladder's copies add no triangle, so they leave the edges as they are).
     let edges = Level0Edges::new(&welded);
+    let welded = area::prepare(welded, settings, Some(edges.sorted()));
     // The part sizes and the first level's groups (METIS) are serial passes: beside the
     // surface's parallel build.
     let ((original, part_size), (clusters, parts)) = rayon::join(

@@ -3,6 +3,7 @@
 //! errors, nested spheres, intact pages — with one root.
 
 use mres_build::bake::{bake as bake_source, bake_file};
+use mres_build::settings::PreserveArea;
 use mres_build::BakeSettings;
 use mres_check::validate::{validate, Report, ValidateOptions};
 use mres_cli::generate;
@@ -80,7 +81,7 @@ fn foliage_keeps_its_area_with_preserve_area() {
     // so that every cut keeps about the card area of full detail; without it the coarsest cut
     // keeps a few percent. Both validate (crack-free, honest errors, one root).
     let cuts = [0.05, 0.2, f32::MAX];
-    let area = |preserve_area: bool, shard_triangles: u64| {
+    let area = |preserve_area: PreserveArea, shard_triangles: u64| {
         let settings = BakeSettings { preserve_area, shard_triangles, ..BakeSettings::default() };
         let bytes = bake_source(generate::cards(3000), &settings, &|_| {}).expect("bake").bytes;
         let (file, report) = check(bytes, 200);
@@ -88,13 +89,28 @@ fn foliage_keeps_its_area_with_preserve_area() {
         mres_cli::inspect::cut_area_fractions(&file, &cuts).expect("pages decode")
     };
     let whole = BakeSettings::default().shard_triangles;
-    let plain = area(false, whole);
+    let plain = area(PreserveArea::Off, whole);
     assert!(plain[2] < 0.1, "without preserve_area the coarsest cut keeps {plain:?}");
     // Whole, and in shards of 2,000 triangles (the merged stages grow the parts on).
-    for grown in [area(true, whole), area(true, 2000)] {
+    for grown in [area(PreserveArea::On, whole), area(PreserveArea::On, 2000)] {
         for (cut, kept) in cuts.iter().zip(&grown) {
             assert!((0.6..1.6).contains(kept), "cut at {cut}: area kept {kept} (all: {grown:?})");
         }
+    }
+}
+
+#[test]
+fn auto_preserve_area_grows_a_card_field_and_leaves_a_closed_mesh_as_it_is() {
+    // "auto" decides per mesh: a card field (all of its area in small open parts) bakes as
+    // with it on, a closed sphere and a terrain (one large open part) as with it off.
+    let with = |preserve_area| BakeSettings { preserve_area, ..BakeSettings::default() };
+    let bytes = |mesh: fn() -> SourceMesh, setting| bake_source(mesh(), &with(setting), &|_| {}).expect("bake").bytes;
+    let cards = || generate::cards(1000);
+    let on = bytes(cards, PreserveArea::On);
+    assert_ne!(on, bytes(cards, PreserveArea::Off), "the cards grow with it on");
+    assert_eq!(bytes(cards, PreserveArea::Auto), on);
+    for mesh in [(|| generate::sphere(20)) as fn() -> SourceMesh, || generate::terrain(40)] {
+        assert_eq!(bytes(mesh, PreserveArea::Auto), bytes(mesh, PreserveArea::Off));
     }
 }
 
