@@ -47,7 +47,8 @@ pub struct BakeStats {
 /// Imports the mesh file at `path` (a large OBJ is streamed) and bakes it, reporting each
 /// stage to `progress` (`&|_| {}` for none).
 pub fn bake_file(path: &Path, settings: &BakeSettings, progress: Progress) -> Result<Baked, BakeError> {
-    let _span = tracing::info_span!("bake", path = %path.display()).entered();
+    // At error level, so that every event of the bake names its file (warnings included).
+    let _span = tracing::error_span!("bake", path = %path.display()).entered();
     let start = Instant::now();
     progress("import");
     let source = Source::open(path, settings.shard_triangles)?;

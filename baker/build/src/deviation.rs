@@ -213,6 +213,11 @@ pub struct Original {
     /// not measured, so the measured ones lie apart), and a query left to the hierarchy costs
     /// about 20 walks.
     at_position: Vec<u32>,
+    /// The centre of the mesh's bounds, subtracted from every point: distances are found in
+    /// coordinates around it, so that their rounding depends on the mesh's size and not on
+    /// where it lies (a terrain in map coordinates, 4e6 from the origin, got 32 m on every
+    /// error from rounding at the absolute coordinates).
+    centre: [f32; 3],
     /// Bound on the f32 rounding of a distance at these coordinates.
     slack: f64,
 }
@@ -221,7 +226,8 @@ impl Original {
     /// The level-0 triangles of `mesh` (its `indices`), in `order` (the mesh's
     /// [`crate::partition::triangle_order`], which the level-0 clusters share).
     pub fn new(mesh: &WeldedMesh, order: &[u32]) -> Original {
-        let p = |v: u32| mesh.positions[v as usize];
+        let centre = bounds_centre(&mesh.positions);
+        let p = |v: u32| sub(mesh.positions[v as usize], centre);
         let source = order.to_vec();
         let corners = |t: u32| &mesh.indices[t as usize * 3..t as usize * 3 + 3];
         let tris: Vec<Triangle<f32>> = source
@@ -233,9 +239,12 @@ impl Original {
             .collect();
         let ids: Vec<u32> =
             source.iter().flat_map(|&t| corners(t).iter().map(|&v| mesh.position_ids[v as usize])).collect();
-        let largest = mesh.positions.iter().flatten().fold(0.0f32, |m, &x| m.max(x.abs()));
+        let largest = mesh.positions.iter().flat_map(|&q| sub(q, centre)).fold(0.0f32, |m, x| m.max(x.abs()));
         // Rounding of the subtractions, products and sums: a few dozen ulps of the largest
-        // coordinate (far below the position grid's step).
+        // coordinate around the centre (far below the position grid's step). The points
+        // themselves are the file's (FORMAT.md §3): the subtraction of the centre is exact
+        // where a coordinate is within a factor of 2 of the centre's (a mesh far from the
+        // origin), and rounds by at most half an ulp of the result elsewhere.
         let slack = 64.0 * f32::EPSILON as f64 * largest as f64;
         // The first triangle of each position, in surface order: the same for any thread count.
         let at_position: Vec<AtomicU32> = (0..mesh.position_count).map(|_| AtomicU32::new(u32::MAX)).collect();
@@ -243,7 +252,7 @@ impl Original {
             at_position[p as usize].fetch_min(s as u32 / 3, Relaxed);
         });
         let at_position = at_position.into_iter().map(AtomicU32::into_inner).collect();
-        Original { surface: Surface::new(tris, &ids), source, at_position, slack }
+        Original { surface: Surface::new(tris, &ids), source, at_position, centre, slack }
     }
 
     /// Output → original for `output` (welded ids) with sample bits `duty`, from the bound
@@ -257,12 +266,12 @@ impl Original {
         mut worst: f64,
         record2: Option<f32>,
     ) -> (f64, Far) {
-        let absolute = |v: u32| mesh.positions[v as usize];
+        let local = |v: u32| sub(mesh.positions[v as usize], self.centre);
         let id = |v: u32| mesh.position_ids[v as usize];
         let mut far = Far::default();
         let mut hint = usize::MAX;
         for (t, &duty) in output.chunks_exact(3).zip(duty) {
-            let tri = [absolute(t[0]), absolute(t[1]), absolute(t[2])];
+            let tri = [local(t[0]), local(t[1]), local(t[2])];
             for b in set_bits(duty) {
                 let p = sample_point(&tri, b);
                 let d = ((worst / SAMPLING_MARGIN - self.slack).max(0.0)) as f32;
@@ -290,6 +299,18 @@ impl Original {
         let t = self.source[t] as usize;
         &mesh.indices[t * 3..t * 3 + 3]
     }
+}
+
+/// The centre of the bounds of `points`.
+fn bounds_centre(points: &[[f32; 3]]) -> [f32; 3] {
+    let (lo, hi) = points.iter().fold(([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]), |(lo, hi), p| {
+        ([0, 1, 2].map(|k| lo[k].min(p[k])), [0, 1, 2].map(|k| hi[k].max(p[k])))
+    });
+    [0, 1, 2].map(|k| if lo[k] <= hi[k] { lo[k] * 0.5 + hi[k] * 0.5 } else { 0.0 })
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 /// `total` rounded up to f32, and at least `simplifier_error`.

@@ -128,7 +128,8 @@ pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQua
             unit_vertex[src as usize]
         }
     };
-    add_triangles(&mut out, mesh.triangle_count(), vertex_of);
+    let collapsed = add_triangles(&mut out, mesh.triangle_count(), vertex_of);
+    warn_collapsed(&out, &collapsed, vertex_of, grid.step, settings.position_bits);
     out.degenerate_dropped += mesh.degenerate_dropped;
     out.source_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
     out
@@ -272,9 +273,32 @@ fn weld_units(
     (out, unit_vertex.into_iter().map(AtomicU32::into_inner).collect())
 }
 
+/// Warns where triangles of the source that the importer kept (`collapsed`, by index, with
+/// `vertex_of` their corners' welded vertices) were dropped as thinner than the grid's `step`
+/// and left nothing in their place: thin geometry (a railing, a cable, a strip) the file would
+/// lack without a word. A dropped sliver inside a surface (thousands on a scan) has its
+/// corners used by the triangles around it and is not worth a warning.
+fn warn_collapsed(out: &WeldedMesh, collapsed: &[u32], vertex_of: impl Fn(usize) -> u32, step: f32, bits: u32) {
+    if collapsed.is_empty() {
+        return;
+    }
+    let mut used = vec![false; out.position_count];
+    for &v in &out.indices {
+        used[out.position_ids[v as usize] as usize] = true;
+    }
+    let alone = |t: u32| (0..3).any(|k| !used[out.position_ids[vertex_of(3 * t as usize + k) as usize] as usize]);
+    let vanished = collapsed.iter().filter(|&&t| alone(t)).count();
+    if vanished > 0 {
+        tracing::warn!(
+            "{vanished} triangles are thinner than the position grid's step ({step:e}) and were dropped with \
+             nothing left in their place: raise position_bits (now {bits}) to keep them"
+        );
+    }
+}
+
 /// Adds the `triangles` triangles whose corner `c` is welded vertex `vertex_of(c)`, dropping
-/// those that are degenerate on the grid.
-fn add_triangles(out: &mut WeldedMesh, triangles: usize, vertex_of: impl Fn(usize) -> u32 + Sync) {
+/// those that are degenerate on the grid; returns the dropped ones.
+fn add_triangles(out: &mut WeldedMesh, triangles: usize, vertex_of: impl Fn(usize) -> u32 + Sync) -> Vec<u32> {
     let welded: Vec<Option<[u32; 3]>> = (0..triangles)
         .into_par_iter()
         .map(|t| {
@@ -284,7 +308,9 @@ fn add_triangles(out: &mut WeldedMesh, triangles: usize, vertex_of: impl Fn(usiz
         })
         .collect();
     out.indices = welded.par_iter().with_min_len(4096).flat_map_iter(|t| t.iter().flatten().copied()).collect();
-    out.degenerate_dropped += welded.iter().filter(|t| t.is_none()).count() as u64;
+    let dropped: Vec<u32> = (0..triangles as u32).filter(|&t| welded[t as usize].is_none()).collect();
+    out.degenerate_dropped += dropped.len() as u64;
+    dropped
 }
 
 impl WeldedMesh {

@@ -366,3 +366,34 @@ fn repack_to_layout_pages_and_back_is_exact() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("none.mres"), "{}", text(&o));
 }
+
+#[test]
+fn thin_geometry_dropped_on_the_grid_is_warned_about_by_file() {
+    // A 1000 × 1000 floor and a 1000-long strip beside it, `width` wide, in 20 quads: at 16
+    // position bits the grid step is about 0.015, so a strip 0.005 wide collapses to lines.
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, width: f32| {
+        let mut obj = String::from("v 0 0 0\nv 1000 0 0\nv 1000 1000 0\nv 0 1000 0\nf 1 2 3\nf 1 3 4\n");
+        for k in 0..=20 {
+            let x = 50.0 * k as f32;
+            obj += &format!("v {x} -10 0\nv {x} {} 0\n", -10.0 + width);
+        }
+        for k in 0..20 {
+            let a = 5 + 2 * k;
+            obj += &format!("f {a} {} {}\nf {a} {} {}\n", a + 2, a + 3, a + 3, a + 1);
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, obj).unwrap();
+        path
+    };
+    let bake = |path: &Path| {
+        let o = run(BAKE_ALL, &[path.to_str().unwrap(), "-o", dir.path().join("out").to_str().unwrap(), "--no-cache"]);
+        assert!(o.status.success(), "{}", text(&o));
+        text(&o)
+    };
+    let msg = bake(&write("strip.obj", 0.005));
+    assert!(msg.contains("strip.obj") && msg.contains("thinner than the position grid"), "{msg}");
+    assert!(msg.contains("40 triangles"), "{msg}");
+    let msg = bake(&write("wide.obj", 0.5));
+    assert!(!msg.contains("thinner"), "{msg}");
+}
