@@ -122,6 +122,47 @@ fn a_mesh_far_from_the_origin_gets_the_errors_it_gets_at_the_origin() {
     assert!(away <= 1.25 * at_origin, "median group error {away} away from the origin, {at_origin} at it");
 }
 
+/// A 10 × 10 floor and a 10 × 5 wall standing on one of its edges, grids of `n` squares per
+/// 10 units, the wall's triangles wound like the floor's in its own plane: along the fold
+/// the two sides' half-edges run the same way (one panel is flipped, as in many exported
+/// scenes).
+fn floor_and_wall(n: u32) -> SourceMesh {
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    let mut panel = |rows: u32, at: &dyn Fn(f32, f32) -> [f32; 3]| {
+        let base = positions.len() as u32;
+        let step = 10.0 / n as f32;
+        for j in 0..=rows {
+            for i in 0..=n {
+                positions.push(at(i as f32 * step, j as f32 * step));
+            }
+        }
+        let id = |i: u32, j: u32| base + j * (n + 1) + i;
+        for j in 0..rows {
+            for i in 0..n {
+                indices.extend([id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+    };
+    panel(n, &|u, v| [u, v, 0.0]);
+    panel(n / 2, &|u, v| [u, 0.0, v]);
+    SourceMesh::positions_only(positions, indices)
+}
+
+#[test]
+fn a_wall_on_a_flipped_floor_simplifies_without_folding() {
+    // The regular simplifier cannot collapse along the fold (its half-edges do not pair) and
+    // once the panels are fans on it, it folds the wall onto the floor (an error of half the
+    // diagonal); the permissive run collapses along it.
+    let (file, report) = check(bake(floor_and_wall(80)), 100);
+    let diagonal = (10.0f32 * 10.0 + 10.0 * 10.0 + 5.0 * 5.0).sqrt();
+    let cut = select::uniform_cut(&file.groups, &file.clusters, 1e-3 * diagonal);
+    let triangles: u64 = cut.iter().map(|&c| file.clusters[c as usize].triangle_count as u64).sum();
+    assert!(triangles <= 128, "the cut at 1e-3 × diagonal keeps {triangles} triangles");
+    let finite = file.groups.iter().map(|g| g.error).filter(|e| e.is_finite());
+    assert!(finite.fold(0.0f32, f32::max) < 0.01 * diagonal, "levels {:?}", report.per_level);
+}
+
 #[test]
 fn auto_preserve_area_grows_a_card_field_and_leaves_a_closed_mesh_as_it_is() {
     // "auto" decides per mesh: a card field (all of its area in small open parts) bakes as
