@@ -29,7 +29,7 @@ pub enum WriteError {
     #[error("zstd: {0}")]
     Compress(#[from] std::io::Error),
     /// The file being rewritten ([`rewrite`]) does not read.
-    #[error("{0}")]
+    #[error(transparent)]
     Read(#[from] MresError),
 }
 

@@ -365,6 +365,16 @@ fn repack_to_layout_pages_and_back_is_exact() {
     let o = run(MRES, &["repack", dir.path().join("none.mres").to_str().unwrap(), "--pages", "layout", "-o", k]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("none.mres"), "{}", text(&o));
+    // A damaged page is named once, with the file.
+    let mut bytes = compact;
+    let last = bytes.len() - 1;
+    bytes[last] ^= 0x55;
+    let bad = dir.path().join("bad.mres");
+    std::fs::write(&bad, bytes).unwrap();
+    let o = run(MRES, &["repack", bad.to_str().unwrap(), "--pages", "layout", "-o", k]);
+    let msg = text(&o);
+    assert_eq!(o.status.code(), Some(2), "{msg}");
+    assert!(msg.contains("bad.mres") && msg.matches("checksum mismatch").count() == 1, "{msg}");
 }
 
 #[test]
