@@ -226,7 +226,7 @@ impl Original {
     /// The level-0 triangles of `mesh` (its `indices`), in `order` (the mesh's
     /// [`crate::partition::triangle_order`], which the level-0 clusters share).
     pub fn new(mesh: &WeldedMesh, order: &[u32]) -> Original {
-        let centre = bounds_centre(&mesh.positions);
+        let (centre, largest) = around(points_bounds(&mesh.positions));
         let p = |v: u32| sub(mesh.positions[v as usize], centre);
         let source = order.to_vec();
         let corners = |t: u32| &mesh.indices[t as usize * 3..t as usize * 3 + 3];
@@ -239,7 +239,6 @@ impl Original {
             .collect();
         let ids: Vec<u32> =
             source.iter().flat_map(|&t| corners(t).iter().map(|&v| mesh.position_ids[v as usize])).collect();
-        let largest = mesh.positions.iter().flat_map(|&q| sub(q, centre)).fold(0.0f32, |m, x| m.max(x.abs()));
         // Rounding of the subtractions, products and sums: a few dozen ulps of the largest
         // coordinate around the centre (far below the position grid's step). The points
         // themselves are the file's (FORMAT.md §3): the subtraction of the centre is exact
@@ -301,12 +300,23 @@ impl Original {
     }
 }
 
-/// The centre of the bounds of `points`.
-fn bounds_centre(points: &[[f32; 3]]) -> [f32; 3] {
-    let (lo, hi) = points.iter().fold(([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]), |(lo, hi), p| {
+/// The bounds of `points`.
+fn points_bounds(points: &[[f32; 3]]) -> Box3 {
+    points.iter().fold(([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]), |(lo, hi), p| {
         ([0, 1, 2].map(|k| lo[k].min(p[k])), [0, 1, 2].map(|k| hi[k].max(p[k])))
-    });
-    [0, 1, 2].map(|k| if lo[k] <= hi[k] { lo[k] * 0.5 + hi[k] * 0.5 } else { 0.0 })
+    })
+}
+
+/// The centre of box `(lo, hi)` and its reach: the largest coordinate of a point in it,
+/// taken from the centre in f32 (the subtraction rounds monotonically, so no point's is
+/// larger than a corner's). An empty box gives the origin and 0.
+fn around((lo, hi): Box3) -> ([f32; 3], f32) {
+    if (0..3).any(|k| lo[k] > hi[k]) {
+        return ([0.0; 3], 0.0);
+    }
+    let centre = [0, 1, 2].map(|k| lo[k] * 0.5 + hi[k] * 0.5);
+    let reach = (0..3).map(|k| (hi[k] - centre[k]).max(centre[k] - lo[k])).fold(0.0f32, f32::max);
+    (centre, reach)
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -375,12 +385,10 @@ fn measure(
         Some(owned) => owned.par_iter().map(entry).collect(),
         None => input.par_chunks_exact(3).map(|t| [absolute(t[0]), absolute(t[1]), absolute(t[2])]).collect(),
     };
-    let (lo, hi) = input_bounds(&input_tris, sides.owned, absolute);
-    let center = [0, 1, 2].map(|k| lo[k] * 0.5 + hi[k] * 0.5);
-    let reach = (0..3).map(|k| (hi[k] - center[k]).max(center[k] - lo[k])).fold(0.0f32, f32::max);
+    let (center, reach) = around(input_bounds(&input_tris, sides.owned, absolute));
     // Rounding of the f32 subtraction, products and sums (a few dozen ulps of the group's reach).
     let slack = 64.0 * f32::EPSILON as f64 * reach as f64;
-    let to_local = |p: [f32; 3]| [p[0] - center[0], p[1] - center[1], p[2] - center[2]];
+    let to_local = |p: [f32; 3]| sub(p, center);
     input_tris.par_iter_mut().with_min_len(4096).for_each(|t| *t = t.map(to_local));
     let local = |v: u32| to_local(mesh.positions[v as usize]);
     let triangles = |indices: &[u32]| -> Vec<Triangle<f32>> {
