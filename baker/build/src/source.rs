@@ -17,7 +17,8 @@ pub trait TriangleSource: Sync {
     fn uvs(&self) -> &[[f32; 2]];
     /// Triangles to stream (an estimate is fine: it only sizes the shards).
     fn triangles(&self) -> u64;
-    /// Triangles the importer already dropped as degenerate (not streamed).
+    /// Triangles the importer already dropped as degenerate, and faces of fewer than three
+    /// vertices (not streamed).
     fn dropped(&self) -> u64;
     /// Calls `f` with every triangle's corners (absent attributes: [`NONE`]) and material,
     /// always in the same order.
@@ -81,7 +82,7 @@ impl TriangleSource for StreamedObj<'_> {
     }
 
     fn dropped(&self) -> u64 {
-        0
+        self.obj.short_faces
     }
 
     fn for_each_triangle(&self, f: &mut dyn FnMut([Corner; 3], u32)) -> Result<(), ImportError> {

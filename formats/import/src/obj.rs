@@ -22,7 +22,9 @@
 //!
 //! `tobj` then parses with `single_index` (positions, normals and UVs share one index, so a
 //! vertex is split wherever its UV or normal differs: seams stay correct) and `triangulate`
-//! (polygons become fans around their first vertex; points and lines are ignored).
+//! (polygons become fans around their first vertex; points and lines are ignored). A face of
+//! one or two vertices has no triangle: the scan counts it with the degenerate triangles
+//! dropped ([`SourceMesh::degenerate_dropped`]), so that the bake reports it.
 
 use std::io::{BufRead, Cursor, Read};
 use std::path::{Path, PathBuf};
@@ -41,6 +43,8 @@ struct Scan {
     material_names: Vec<String>,
     /// Triangles after fan triangulation of every face with three or more vertices.
     triangles: u64,
+    /// Faces of one or two vertices (no triangle).
+    short_faces: u64,
     /// Byte offsets of keywords to overwrite with `#` (`l`, `mtllib`): tobj ignores them then.
     blank: Vec<usize>,
     /// Byte ranges to overwrite with spaces (vertex colours).
@@ -79,7 +83,16 @@ pub(super) fn import(mut bytes: Vec<u8>, limits: &ImportLimits) -> KindResult<So
         ImportErrorKind::Parse(format!("{e} (reported by tobj; line unknown: the validating scan missed it)"))
     })?;
 
-    convert(&models, scan.material_names.len(), scan.triangles, limits)
+    match convert(&models, scan.material_names.len(), scan.triangles, limits) {
+        Ok(mut mesh) => {
+            mesh.degenerate_dropped += scan.short_faces;
+            Ok(mesh)
+        }
+        Err(ImportErrorKind::NoTriangles { degenerate_dropped }) => {
+            Err(ImportErrorKind::NoTriangles { degenerate_dropped: degenerate_dropped + scan.short_faces })
+        }
+        Err(e) => Err(e),
+    }
 }
 
 /// Merges the `tobj` models (one per object/group and material) into one mesh.
@@ -201,6 +214,7 @@ fn scan(text: &str) -> KindResult<Scan> {
                 let mut corners = 0u64;
                 face(words, line_no, &counts, Some(&mut refs), |_| corners += 1)?;
                 scan.triangles += corners.saturating_sub(2);
+                scan.short_faces += u64::from(corners < 3);
             }
             _ => {}
         }

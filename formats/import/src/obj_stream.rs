@@ -37,6 +37,8 @@ pub struct ObjVertices {
     pub material_names: Vec<String>,
     /// Triangles after fan triangulation.
     pub triangles: u64,
+    /// Faces of one or two vertices (no triangle), counted with the degenerate ones dropped.
+    pub short_faces: u64,
     /// Every face vertex has a texture coordinate (else UVs are dropped for the whole mesh).
     pub all_uvs: bool,
     /// Every face vertex has a normal.
@@ -88,6 +90,7 @@ impl ObjVertices {
                         corners += 1;
                     })?;
                     out.triangles += corners.saturating_sub(2);
+                    out.short_faces += u64::from(corners < 3);
                     check_triangle_count(out.triangles, limits)?;
                 }
                 _ => {}
@@ -99,7 +102,7 @@ impl ObjVertices {
         }
         refs.end(&counts)?;
         if out.triangles == 0 {
-            return Err(ImportErrorKind::NoTriangles { degenerate_dropped: 0 });
+            return Err(ImportErrorKind::NoTriangles { degenerate_dropped: out.short_faces });
         }
         if !out.all_uvs {
             out.uvs = Vec::new();

@@ -363,6 +363,24 @@ fn obj_quads_and_ngons_are_triangulated() {
 }
 
 #[test]
+fn obj_faces_of_one_or_two_vertices_are_counted_as_dropped() {
+    // Such a face has no triangle; both readers count it, so that the bake reports it.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("short_faces.obj");
+    std::fs::write(&path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\nf 3\n").unwrap();
+    let mesh = import_ok(&path);
+    assert_eq!((mesh.triangle_count(), mesh.degenerate_dropped), (1, 2));
+    let streamed = ObjVertices::read(&path, &ImportLimits::default()).unwrap();
+    assert_eq!((streamed.triangles, streamed.short_faces), (1, 2));
+    // With no triangle at all, the error counts them.
+    std::fs::write(&path, "v 0 0 0\nv 1 0 0\nf 1 2\n").unwrap();
+    let err = import(&path).unwrap_err();
+    assert!(matches!(err.kind, ImportErrorKind::NoTriangles { degenerate_dropped: 1 }), "{err}");
+    let err = ObjVertices::read(&path, &ImportLimits::default()).unwrap_err();
+    assert!(matches!(err.kind, ImportErrorKind::NoTriangles { degenerate_dropped: 1 }), "{err}");
+}
+
+#[test]
 fn obj_attribute_missing_on_some_faces_is_dropped() {
     let mesh = import_ok(&data("partial_uvs.obj"));
     assert_eq!(mesh.triangle_count(), 2);
