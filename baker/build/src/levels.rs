@@ -39,9 +39,10 @@ const FORCED_GROUP_CLUSTERS: usize = 32;
 const SHARED: u32 = u32::MAX - 1;
 /// A group's simplification whose error exceeds this many times its members' error, while
 /// it holds positions locked only as non-manifold, is tried again with those unlocked (see
-/// [`Builder::simplify_rounds`]): the chains left locked can leave a group nothing to
-/// collapse but its corners (one-sided walls crossing on a floor: 0.21 against 0.0012).
-const JUMP: f32 = 8.0;
+/// [`Builder::simplify_rounds`]): the edges left locked can leave a group nothing to collapse
+/// but its corners (a wall standing on a floor: 5.03 against 5.9e-4). Chosen on four inputs
+/// with non-manifold edges (docs/BENCHMARKS.md, "A wall standing inside a floor").
+const JUMP: f32 = 2.0;
 /// Safety stop on the number of levels.
 const MAX_LEVELS: u32 = 64;
 
