@@ -37,6 +37,7 @@ if [ "$generated" != 0 ]; then
   g cards 5000 foliage-cards-5000.obj
   g seamed-sphere 48 uv-seams-6-materials.obj
   g defects 48 holes-fins-duplicates.obj
+  g walls 80 walls-standing-inside-a-floor.obj
 fi
 
 inputs=()

@@ -228,6 +228,41 @@ pub fn rooms(count: u32) -> SourceMesh {
     SourceMesh::positions_only(positions, indices)
 }
 
+/// Walls standing inside a floor, as an architecture model welded into one mesh: a 10 × 10
+/// floor of `n` × `n` quads and two 10 × 5 walls of `n` × `n / 2` quads standing on its middle
+/// lines and crossing each other (`n` even), all on a 1/1024 grid so that they share their
+/// vertices. Each edge of a wall's foot is used by three triangles (two of the floor, one of the
+/// wall), each edge of the line where the walls cross by four: non-manifold edges everywhere
+/// the parts meet. 4·N² triangles.
+pub fn walls(n: u32) -> SourceMesh {
+    let n = n.max(2) & !1;
+    let (mut positions, mut indices) = (Vec::new(), Vec::new());
+    let mut panel = |o: [f32; 3], du: [f32; 3], dv: [f32; 3], rows: u32| {
+        let base = positions.len() as u32;
+        for j in 0..=rows {
+            for i in 0..=n {
+                let (a, b) = (i as f32 / n as f32, j as f32 / rows as f32);
+                positions.push([0, 1, 2].map(|c| ((o[c] + a * du[c] + b * dv[c]) * 1024.0).round() / 1024.0));
+            }
+        }
+        let at = |i: u32, j: u32| base + j * (n + 1) + i;
+        for (i, j) in (0..rows).flat_map(|j| (0..n).map(move |i| (i, j))) {
+            indices.extend_from_slice(&[
+                at(i, j),
+                at(i + 1, j),
+                at(i + 1, j + 1),
+                at(i, j),
+                at(i + 1, j + 1),
+                at(i, j + 1),
+            ]);
+        }
+    };
+    panel([0.0; 3], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0], n);
+    panel([0.0, 5.0, 0.0], [10.0, 0.0, 0.0], [0.0, 0.0, 5.0], n / 2);
+    panel([5.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 5.0], n / 2);
+    SourceMesh::positions_only(positions, indices)
+}
+
 /// The cube-sphere with defects real scans and CAD exports have: every 97th triangle removed
 /// (holes), every 89th duplicated, and a fin of two triangles on one edge per 1,000 triangles
 /// (non-manifold edges used three times).
@@ -267,6 +302,23 @@ mod tests {
         assert_eq!(seamed.triangle_count(), 1200);
         assert_eq!(seamed.positions.len(), 6 * 121);
         assert_eq!(rooms(3).triangle_count(), 3 * 796);
+        assert_eq!(walls(10).triangle_count(), 4 * 100);
+    }
+
+    #[test]
+    fn walls_meet_the_floor_and_each_other_on_non_manifold_edges() {
+        let m = walls(8);
+        let key = |i: u32| m.positions[i as usize].map(f32::to_bits);
+        let mut uses = std::collections::HashMap::new();
+        for t in m.indices.chunks_exact(3) {
+            for e in 0..3 {
+                let (a, b) = (key(t[e]), key(t[(e + 1) % 3]));
+                *uses.entry(if a < b { (a, b) } else { (b, a) }).or_insert(0) += 1;
+            }
+        }
+        let used = |n: i32| uses.values().filter(|&&u| u == n).count();
+        // Two feet of 8 edges (three triangles each), and the crossing line of 4 (four each).
+        assert_eq!((used(3), used(4)), (16, 4));
     }
 
     /// Edges used by exactly one triangle (open borders), by position.

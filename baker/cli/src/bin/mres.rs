@@ -251,6 +251,9 @@ enum MeshKind {
     Defects,
     /// N rooms: one-sided walls with window holes, open crates and cards (796 triangles each).
     Rooms,
+    /// A floor of N × N quads with two crossing walls standing inside it: non-manifold edges
+    /// where the parts meet, 4·N² triangles (N even).
+    Walls,
 }
 
 #[derive(Args)]
@@ -523,6 +526,7 @@ fn generate_cmd(a: GenerateArgs) -> Result<ExitCode> {
         MeshKind::Cards => generate::cards(a.n),
         MeshKind::Defects => generate::defects(a.n),
         MeshKind::Rooms => generate::rooms(a.n),
+        MeshKind::Walls => generate::walls(a.n),
     };
     let triangles = mesh.triangle_count();
     write_obj(&mesh, out)?;
