@@ -181,6 +181,38 @@ fn a_wall_with_normals_standing_inside_a_floor_simplifies() {
 }
 
 #[test]
+fn crossing_walls_with_normals_and_uvs_inside_a_floor_simplify() {
+    // Three sheets with their own normals and UVs meet on the feet and the crossing line: unlocked,
+    // those positions still stay put in a regular run, and the top groups folded the walls
+    // (the root 1.6 % of the diagonal from the input). The lenient run (stuck, or jumped) tries
+    // the permissive run beside the regular one where there are attributes.
+    let mut mesh = generate::walls(80);
+    let (floor, wall) = (81 * 81, 81 * 41);
+    let normal = |v: usize| match v {
+        v if v < floor => [0.0, 0.0, 1.0],
+        v if v < floor + wall => [0.0, 1.0, 0.0],
+        _ => [1.0, 0.0, 0.0],
+    };
+    mesh.normals = Some((0..mesh.positions.len()).map(normal).collect());
+    // Each sheet's own UVs: (column, row) over its grid.
+    let uv = |v: usize| {
+        let (local, rows) = if v < floor { (v, 80) } else { ((v - floor) % wall, 40) };
+        [(local % 81) as f32 / 80.0, (local / 81) as f32 / rows as f32]
+    };
+    mesh.uvs = Some((0..mesh.positions.len()).map(uv).collect());
+    // The stored errors count meshoptimizer's attribute error (the normals' seams are gone),
+    // so the measured distance of the coarsest cut tells whether the shape is kept.
+    let (lo, hi) = mesh.bounds().expect("a mesh with positions");
+    let diagonal = (0..3).map(|k| (hi[k] - lo[k]) as f64 * (hi[k] - lo[k]) as f64).sum::<f64>().sqrt();
+    let input = mres_cli::bench::triangles(&mesh);
+    let built = mres_cli::bench::run_mres(mesh, &BakeSettings::default()).expect("bake");
+    let root = (built.cut)(f32::MAX);
+    assert!(root.len() <= 128, "the root keeps {} triangles", root.len());
+    let distance = mres_check::distance::two_sided(&root, &input, 200_000).scaled(diagonal);
+    assert!(distance.max < 1e-3, "the root is {} × diagonal from the input", distance.max);
+}
+
+#[test]
 fn a_book_of_pages_on_one_spine_simplifies() {
     // Eight flat pages share the spine: each of its edges is used by eight triangles, every
     // spine position is locked as non-manifold, and the top groups folded pages onto each
