@@ -175,30 +175,9 @@ pub fn cards(count: u32) -> SourceMesh {
 /// surface itself seen from behind.
 pub fn rooms(count: u32) -> SourceMesh {
     let side = (count as f32).sqrt().ceil().max(1.0) as u32;
-    let (mut positions, mut indices) = (Vec::new(), Vec::new());
+    let mut mesh = SourceMesh::positions_only(Vec::new(), Vec::new());
     let mut quads = |o: [f32; 3], du: [f32; 3], dv: [f32; 3], k: u32, hole: &dyn Fn(u32, u32) -> bool| {
-        let base = positions.len() as u32;
-        for j in 0..=k {
-            for i in 0..=k {
-                let (a, b) = (i as f32 / k as f32, j as f32 / k as f32);
-                // On a 1/1024 grid, so that sheets meant to meet share their vertices exactly.
-                positions.push([0, 1, 2].map(|c| ((o[c] + a * du[c] + b * dv[c]) * 1024.0).round() / 1024.0));
-            }
-        }
-        let at = |i: u32, j: u32| base + j * (k + 1) + i;
-        for j in 0..k {
-            for i in (0..k).filter(|&i| !hole(i, j)) {
-                // Counter-clockwise seen from the side du × dv points to.
-                indices.extend_from_slice(&[
-                    at(i, j),
-                    at(i + 1, j),
-                    at(i + 1, j + 1),
-                    at(i, j),
-                    at(i + 1, j + 1),
-                    at(i, j + 1),
-                ]);
-            }
-        }
+        panel(&mut mesh, (o, du, dv), (k, k), hole);
     };
     let solid = |_: u32, _: u32| false;
     let window = |i: u32, j: u32| (3..5).contains(&i) && (3..5).contains(&j);
@@ -225,7 +204,34 @@ pub fn rooms(count: u32) -> SourceMesh {
             quads(base, [0.5 * a.cos(), 0.0, 0.5 * a.sin()], [0.1, 0.9, 0.05], 1, &solid);
         }
     }
-    SourceMesh::positions_only(positions, indices)
+    mesh
+}
+
+/// Appends to `mesh` a grid of `cols` × `rows` quads spanning `du` × `dv` from `o`, two
+/// triangles each, counter-clockwise seen from the side du × dv points to, without the quads
+/// (column, row) that `hole` names; the positions on a 1/1024 grid, so that sheets meant to
+/// meet share their vertices exactly.
+fn panel(
+    mesh: &mut SourceMesh,
+    (o, du, dv): ([f32; 3], [f32; 3], [f32; 3]),
+    (cols, rows): (u32, u32),
+    hole: &dyn Fn(u32, u32) -> bool,
+) {
+    let base = mesh.positions.len() as u32;
+    for j in 0..=rows {
+        for i in 0..=cols {
+            let (a, b) = (i as f32 / cols as f32, j as f32 / rows as f32);
+            mesh.positions.push([0, 1, 2].map(|c| ((o[c] + a * du[c] + b * dv[c]) * 1024.0).round() / 1024.0));
+        }
+    }
+    let at = |i: u32, j: u32| base + j * (cols + 1) + i;
+    for j in 0..rows {
+        for i in (0..cols).filter(|&i| !hole(i, j)) {
+            let quad = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j), at(i + 1, j + 1), at(i, j + 1)];
+            mesh.indices.extend_from_slice(&quad);
+            mesh.materials.extend_from_slice(&[0, 0]);
+        }
+    }
 }
 
 /// Walls standing inside a floor, as an architecture model welded into one mesh: a 10 × 10
@@ -236,31 +242,12 @@ pub fn rooms(count: u32) -> SourceMesh {
 /// the parts meet. 4·N² triangles.
 pub fn walls(n: u32) -> SourceMesh {
     let n = n.max(2) & !1;
-    let (mut positions, mut indices) = (Vec::new(), Vec::new());
-    let mut panel = |o: [f32; 3], du: [f32; 3], dv: [f32; 3], rows: u32| {
-        let base = positions.len() as u32;
-        for j in 0..=rows {
-            for i in 0..=n {
-                let (a, b) = (i as f32 / n as f32, j as f32 / rows as f32);
-                positions.push([0, 1, 2].map(|c| ((o[c] + a * du[c] + b * dv[c]) * 1024.0).round() / 1024.0));
-            }
-        }
-        let at = |i: u32, j: u32| base + j * (n + 1) + i;
-        for (i, j) in (0..rows).flat_map(|j| (0..n).map(move |i| (i, j))) {
-            indices.extend_from_slice(&[
-                at(i, j),
-                at(i + 1, j),
-                at(i + 1, j + 1),
-                at(i, j),
-                at(i + 1, j + 1),
-                at(i, j + 1),
-            ]);
-        }
-    };
-    panel([0.0; 3], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0], n);
-    panel([0.0, 5.0, 0.0], [10.0, 0.0, 0.0], [0.0, 0.0, 5.0], n / 2);
-    panel([5.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 5.0], n / 2);
-    SourceMesh::positions_only(positions, indices)
+    let mut mesh = SourceMesh::positions_only(Vec::new(), Vec::new());
+    let solid = |_: u32, _: u32| false;
+    panel(&mut mesh, ([0.0; 3], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]), (n, n), &solid);
+    panel(&mut mesh, ([0.0, 5.0, 0.0], [10.0, 0.0, 0.0], [0.0, 0.0, 5.0]), (n, n / 2), &solid);
+    panel(&mut mesh, ([5.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 5.0]), (n, n / 2), &solid);
+    mesh
 }
 
 /// The cube-sphere with defects real scans and CAD exports have: every 97th triangle removed
