@@ -23,6 +23,7 @@ use mres_geom::bvh::{Bvh, Triangle};
 use mres_geom::edges::edge_key;
 use mres_geom::parts::diagonals;
 use mres_geom::walk::{Surface, STEPS};
+use mres_import::mesh::bounds;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
@@ -226,7 +227,7 @@ impl Original {
     /// The level-0 triangles of `mesh` (its `indices`), in `order` (the mesh's
     /// [`crate::partition::triangle_order`], which the level-0 clusters share).
     pub fn new(mesh: &WeldedMesh, order: &[u32]) -> Original {
-        let (centre, largest) = around(points_bounds(&mesh.positions));
+        let (centre, largest) = bounds(&mesh.positions).map_or(([0.0; 3], 0.0), around);
         let p = |v: u32| sub(mesh.positions[v as usize], centre);
         let source = order.to_vec();
         let corners = |t: u32| &mesh.indices[t as usize * 3..t as usize * 3 + 3];
@@ -298,13 +299,6 @@ impl Original {
         let t = self.source[t] as usize;
         &mesh.indices[t * 3..t * 3 + 3]
     }
-}
-
-/// The bounds of `points`.
-fn points_bounds(points: &[[f32; 3]]) -> Box3 {
-    points.iter().fold(([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]), |(lo, hi), p| {
-        ([0, 1, 2].map(|k| lo[k].min(p[k])), [0, 1, 2].map(|k| hi[k].max(p[k])))
-    })
 }
 
 /// The centre of box `(lo, hi)` and its reach: the largest coordinate of a point in it,

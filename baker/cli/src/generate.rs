@@ -294,22 +294,14 @@ mod tests {
 
     #[test]
     fn walls_meet_the_floor_and_each_other_on_non_manifold_edges() {
-        let m = walls(8);
-        let key = |i: u32| m.positions[i as usize].map(f32::to_bits);
-        let mut uses = std::collections::HashMap::new();
-        for t in m.indices.chunks_exact(3) {
-            for e in 0..3 {
-                let (a, b) = (key(t[e]), key(t[(e + 1) % 3]));
-                *uses.entry(if a < b { (a, b) } else { (b, a) }).or_insert(0) += 1;
-            }
-        }
-        let used = |n: i32| uses.values().filter(|&&u| u == n).count();
+        let uses = edge_uses(&walls(8));
+        let used = |n: u32| uses.values().filter(|&&u| u == n).count();
         // Two feet of 8 edges (three triangles each), and the crossing line of 4 (four each).
         assert_eq!((used(3), used(4)), (16, 4));
     }
 
-    /// Edges used by exactly one triangle (open borders), by position.
-    fn open_edges(m: &SourceMesh) -> usize {
+    /// How many triangles use each edge, edges by position.
+    fn edge_uses(m: &SourceMesh) -> std::collections::HashMap<([u32; 3], [u32; 3]), u32> {
         let key = |i: u32| m.positions[i as usize].map(f32::to_bits);
         let mut uses = std::collections::HashMap::new();
         for t in m.indices.chunks_exact(3) {
@@ -318,7 +310,12 @@ mod tests {
                 *uses.entry(if a < b { (a, b) } else { (b, a) }).or_insert(0) += 1;
             }
         }
-        uses.values().filter(|&&n| n == 1).count()
+        uses
+    }
+
+    /// Edges used by exactly one triangle (open borders), by position.
+    fn open_edges(m: &SourceMesh) -> usize {
+        edge_uses(m).values().filter(|&&n| n == 1).count()
     }
 
     #[test]

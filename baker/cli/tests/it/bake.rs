@@ -202,8 +202,7 @@ fn crossing_walls_with_normals_and_uvs_inside_a_floor_simplify() {
     mesh.uvs = Some((0..mesh.positions.len()).map(uv).collect());
     // The stored errors count meshoptimizer's attribute error (the normals' seams are gone),
     // so the measured distance of the coarsest cut tells whether the shape is kept.
-    let (lo, hi) = mesh.bounds().expect("a mesh with positions");
-    let diagonal = (0..3).map(|k| (hi[k] - lo[k]) as f64 * (hi[k] - lo[k]) as f64).sum::<f64>().sqrt();
+    let diagonal = mres_cli::bench::diagonal(&mesh);
     let input = mres_cli::bench::triangles(&mesh);
     let built = mres_cli::bench::run_mres(mesh, &BakeSettings::default()).expect("bake");
     let root = (built.cut)(f32::MAX);
@@ -238,8 +237,7 @@ fn a_book_of_pages_on_one_spine_simplifies() {
 /// Bakes `mesh` and checks it: the cut at 1e-3 × diagonal keeps at most 128 triangles, and no
 /// group's error reaches 1 % of the diagonal.
 fn assert_small_and_accurate(mesh: SourceMesh) {
-    let (lo, hi) = mesh.bounds().expect("a mesh with positions");
-    let diagonal = (0..3).map(|k| (hi[k] - lo[k]) * (hi[k] - lo[k])).sum::<f32>().sqrt();
+    let diagonal = mres_cli::bench::diagonal(&mesh) as f32;
     let (file, report) = check(bake(mesh), 100);
     let cut = select::uniform_cut(&file.groups, &file.clusters, 1e-3 * diagonal);
     let triangles: u64 = cut.iter().map(|&c| file.clusters[c as usize].triangle_count as u64).sum();
