@@ -13,7 +13,10 @@ use std::collections::BTreeMap;
 pub struct Conditioning {
     /// log2 of the number of level-0 clusters: the depth a balanced DAG needs.
     pub log2_level0_clusters: f64,
-    /// Levels divided by `log2_level0_clusters`.
+    /// Levels down to the first level of a single cluster (the root chain above it is not
+    /// counted; docs/INVARIANTS.md §3).
+    pub depth: u32,
+    /// `depth` divided by `log2_level0_clusters`.
     pub depth_ratio: f64,
     /// Triangles of level l+1 divided by triangles of level l.
     pub reduction_per_level: Vec<f64>,
@@ -76,12 +79,17 @@ pub(crate) fn conditioning(
     }
     let level0_clusters = radius.first().map_or(0, |r| r.1);
     out.log2_level0_clusters = (level0_clusters.max(1) as f64).log2();
-    out.depth_ratio = levels as f64 / out.log2_level0_clusters.max(1.0);
+    // The depth counts the levels down to the first one of a single cluster: the root chain
+    // above it (a lone cluster simplified on by itself, a level at a time) is a list of ever
+    // coarser choices, not a level of the hierarchy.
+    let depth = radius.iter().position(|r| r.1 == 1).map_or(levels, |l| l + 1);
+    out.depth = depth as u32;
+    out.depth_ratio = depth as f64 / out.log2_level0_clusters.max(1.0);
     out.reduction_per_level = triangles.windows(2).map(|w| w[1] as f64 / w[0].max(1) as f64).collect();
     out.mean_cluster_radius_per_level = radius.iter().map(|(sum, n)| sum / (*n).max(1) as f64).collect();
-    if levels as f64 > thresholds.max_depth_factor * out.log2_level0_clusters + thresholds.depth_slack {
+    if depth as f64 > thresholds.max_depth_factor * out.log2_level0_clusters + thresholds.depth_slack {
         violations.push(format!(
-            "DAG depth {levels} exceeds {} x log2(level-0 clusters) + {} = {:.1} (well-conditioned DAG)",
+            "DAG depth {depth} exceeds {} x log2(level-0 clusters) + {} = {:.1} (well-conditioned DAG)",
             thresholds.max_depth_factor,
             thresholds.depth_slack,
             thresholds.max_depth_factor * out.log2_level0_clusters + thresholds.depth_slack

@@ -426,7 +426,8 @@ fn print_validate(file: &Path, report: &mres_check::validate::Report, level0: u6
     );
     let c = &report.conditioning;
     println!(
-        "depth {} vs log2(level-0 clusters) {:.1} (ratio {:.2}); reduction per level {}",
+        "depth {} ({} levels with the root chain above it) vs log2(level-0 clusters) {:.1} (ratio {:.2}); reduction per level {}",
+        c.depth,
         report.levels,
         c.log2_level0_clusters,
         c.depth_ratio,
