@@ -43,7 +43,7 @@ const SHARED: u32 = u32::MAX - 1;
 /// but its corners (a wall standing on a floor: 5.03 against 5.9e-4). Chosen on four inputs
 /// with non-manifold edges (docs/BENCHMARKS.md, "A wall standing inside a floor").
 const JUMP: f32 = 2.0;
-/// The root chain ([`Builder::step_root`]) stops at a lone cluster of at most this many
+/// The root chain ([`Builder::step`]) stops at a lone cluster of at most this many
 /// triangles: below, a link saves a few triangles for a level's header and group.
 const ROOT_CHAIN_TRIANGLES: usize = 16;
 /// Safety stop on the number of levels.
@@ -321,45 +321,23 @@ impl<'a> Builder<'a> {
     /// converted into `converted` beside the level's partition (see [`Converted`]). Returns
     /// false (and changes nothing) when there is nothing left to group, and false after a
     /// level where no group could be simplified.
+    ///
+    /// A lone pending cluster of more than [`ROOT_CHAIN_TRIANGLES`] is a group of its own: the
+    /// root chain (docs/INVARIANTS.md §3) simplifies it on, a level at a time, while it halves.
+    /// The first single cluster is often near 128 triangles (where the last halving happened
+    /// to land), with an error far below what coarse cuts allow (a floor with walls: 128
+    /// triangles within 1e-4 of the diagonal, while clusterlod's root, where its own halving
+    /// landed, has 99); each link is a coarser choice for distant objects.
     pub fn step<O: DagOutput>(
         &mut self,
         progress: Progress,
         output: &O,
         converted: &mut Converted<O::Cluster>,
     ) -> bool {
-        if self.pending.len() <= 1 || self.level >= MAX_LEVELS {
+        let lone_and_small = self.pending.len() == 1 && self.pending_triangles() <= ROOT_CHAIN_TRIANGLES;
+        if self.pending.is_empty() || lone_and_small || self.level >= MAX_LEVELS {
             return false;
         }
-        self.build_level(progress, output, converted)
-    }
-
-    /// The root chain (docs/INVARIANTS.md §3): a lone top cluster is simplified on as a group
-    /// of its own, a level at a time, while it halves and has more than
-    /// [`ROOT_CHAIN_TRIANGLES`]. The first single cluster is often near 128 triangles (where the
-    /// last halving happened to land), with an error far below what coarse cuts allow (a floor
-    /// with walls: 128 triangles within 1e-4 of the diagonal, while clusterlod's root, where
-    /// its own halving landed, has 99); each link is a coarser choice for distant objects.
-    /// Returns false (and changes nothing) when there is no lone cluster to simplify, and
-    /// false after a level where it could not be.
-    fn step_root<O: DagOutput>(
-        &mut self,
-        progress: Progress,
-        output: &O,
-        converted: &mut Converted<O::Cluster>,
-    ) -> bool {
-        if self.pending.len() != 1 || self.level >= MAX_LEVELS || self.pending_triangles() <= ROOT_CHAIN_TRIANGLES {
-            return false;
-        }
-        self.build_level(progress, output, converted)
-    }
-
-    /// One level of [`Builder::step`] or [`Builder::step_root`].
-    fn build_level<O: DagOutput>(
-        &mut self,
-        progress: Progress,
-        output: &O,
-        converted: &mut Converted<O::Cluster>,
-    ) -> bool {
         let (mesh, clusters) = (self.mesh, &self.clusters);
         let pending = || self.pending.iter().map(|&c| &clusters[c]);
         let refs: Vec<&[u32]> = pending().map(|c| c.indices.as_slice()).collect();
@@ -628,7 +606,6 @@ impl<'a> Builder<'a> {
         converted: &mut Converted<O::Cluster>,
     ) {
         while self.step(progress, output, converted) {}
-        while self.step_root(progress, output, converted) {}
         self.make_roots();
     }
 
