@@ -425,10 +425,11 @@ fn print_validate(file: &Path, report: &mres_check::validate::Report, level0: u6
         report.max_pinched_edges
     );
     let c = &report.conditioning;
+    let chain = report.levels.saturating_sub(c.depth);
+    let chain = if chain > 0 { format!(" (then {chain} root-chain levels)") } else { String::new() };
     println!(
-        "depth {} ({} levels with the root chain above it) vs log2(level-0 clusters) {:.1} (ratio {:.2}); reduction per level {}",
+        "depth {}{chain} vs log2(level-0 clusters) {:.1} (ratio {:.2}); reduction per level {}",
         c.depth,
-        report.levels,
         c.log2_level0_clusters,
         c.depth_ratio,
         c.reduction_per_level.iter().map(|r| format!("{r:.2}")).collect::<Vec<_>>().join(" ")
