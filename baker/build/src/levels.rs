@@ -348,10 +348,6 @@ impl<'a> Builder<'a> {
                 convert();
                 parts
             }
-            None if self.pending.len() == 1 => {
-                convert();
-                vec![vec![0]]
-            }
             None => rayon::join(|| groups(mesh, pending(), self.settings), convert).0,
         };
         let mut results = self.simplify_parts(&parts, &refs, NON_MANIFOLD);

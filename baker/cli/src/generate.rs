@@ -211,7 +211,7 @@ pub fn rooms(count: u32) -> SourceMesh {
 /// triangles each, counter-clockwise seen from the side du × dv points to, without the quads
 /// (column, row) that `hole` names; the positions on a 1/1024 grid, so that sheets meant to
 /// meet share their vertices exactly.
-fn panel(
+pub fn panel(
     mesh: &mut SourceMesh,
     (o, du, dv): ([f32; 3], [f32; 3], [f32; 3]),
     (cols, rows): (u32, u32),

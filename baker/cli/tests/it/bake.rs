@@ -244,22 +244,13 @@ fn a_book_of_pages_on_one_spine_simplifies() {
     // Eight flat pages share the spine: each of its edges is used by eight triangles, every
     // spine position is locked as non-manifold, and the top groups folded pages onto each
     // other (8.6 × clusterlod's triangles at equal measured error on a larger book).
-    let (mut positions, mut indices) = (Vec::new(), Vec::new());
+    let mut book = SourceMesh::positions_only(Vec::new(), Vec::new());
     for page in 0..8 {
         let angle = std::f32::consts::PI * 0.8 * page as f32 / 7.0;
-        let base = positions.len() as u32;
-        for j in 0..=20u32 {
-            for i in 0..=40u32 {
-                let (along, out) = (i as f32 * 0.25, j as f32 * 0.25);
-                positions.push([out * angle.cos(), out * angle.sin(), along]);
-            }
-        }
-        let id = |i: u32, j: u32| base + j * 41 + i;
-        for (i, j) in (0..20).flat_map(|j| (0..40).map(move |i| (i, j))) {
-            indices.extend([id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
+        let (along, out) = ([0.0, 0.0, 10.0], [5.0 * angle.cos(), 5.0 * angle.sin(), 0.0]);
+        generate::panel(&mut book, ([0.0; 3], along, out), (40, 20), &|_, _| false);
     }
-    assert_small_and_accurate(SourceMesh::positions_only(positions, indices));
+    assert_small_and_accurate(book);
 }
 
 /// Bakes `mesh` and checks it: the cut at 1e-3 × diagonal keeps at most 128 triangles, and no
@@ -271,7 +262,8 @@ fn assert_small_and_accurate(mesh: SourceMesh) {
     let cut = select::uniform_cut(&file.groups, &file.clusters, 1e-3 * diagonal);
     let triangles: u64 = cut.iter().map(|&c| file.clusters[c as usize].triangle_count as u64).sum();
     assert!(triangles <= 128, "the cut at 1e-3 × diagonal keeps {triangles} triangles");
-    let first_single = report.per_level.iter().position(|l| l.clusters == 1).expect("one cluster") as u32;
+    // The validator's depth: the levels down to the first single cluster.
+    let first_single = report.conditioning.depth - 1;
     let below = file.groups.iter().filter(|g| g.level < first_single).map(|g| g.error);
     assert!(below.fold(0.0f32, f32::max) < 0.01 * diagonal, "levels {:?}", report.per_level);
 }
