@@ -125,7 +125,7 @@ pub fn measure_simplified(
         // Lock around the samples farther than half the excess (and than the outlier ratio).
         let hot_above = (added * 0.5 / SAMPLING_MARGIN).max(OUTLIER_RATIO * estimate);
         let before = extra.len();
-        extra.extend(far.hot(mesh, triangles, hot_above));
+        extra.extend(far.hot(mesh, input, hot_above));
         extra.sort_unstable();
         extra.dedup();
         if extra.len() == before {
@@ -455,8 +455,16 @@ fn measure(
         let input = (&input_tris[..], &reach_of[..]);
         accept_patches(input, (&mut input_duty, &mut found), output, triangle_errors, bound);
     }
-    let side =
-        InputSide { mesh, input, tris: &input_tris, duty: &input_duty, errors: triangle_errors, reach: &reach_of };
+    let side = InputSide {
+        mesh,
+        center,
+        input,
+        output,
+        tris: &input_tris,
+        duty: &input_duty,
+        errors: triangle_errors,
+        reach: &reach_of,
+    };
     let runs: Vec<(f64, Far)> = found
         .par_chunks_mut(7 * RUN_TRIANGLES)
         .enumerate()
@@ -472,7 +480,10 @@ fn measure(
 /// Samples a measurement found farther from the other side than its `record_above`, with
 /// their exact distances (queries beyond the running bound find the nearest triangle), each
 /// with the position ids around it: the corners of the input triangle it lies on or is
-/// nearest to, and for an output sample, of its output triangle. These are the samples that
+/// nearest to, and of the output triangle it lies on or is nearest to; for an input sample
+/// also its point, whose nearest position of the group's input [`Far::hot`] names (a level-0
+/// sample's corners are level-0 positions, which the input above level 1 has mostly lost:
+/// locking only those, a retry changed nothing and the outlier stayed). These are the samples that
 /// raised the running maximum of their run, so the spots that set an outlier's error, not
 /// every sample beyond its hot threshold: the retry locks around them without a second pass
 /// over every sample (a full measure per retry, the whole input at the top levels), and the
@@ -481,6 +492,10 @@ fn measure(
 pub(crate) struct Far {
     /// (squared distance, position id), a sample's ids one after another.
     samples: Vec<(f32, u32)>,
+    /// (squared distance, point in object coordinates) of the input samples among them:
+    /// above level 1 their triangles' corners are level-0 positions the group's input has
+    /// mostly lost, so [`Far::hot`] also names the input positions nearest to the points.
+    points: Vec<(f32, [f32; 3])>,
 }
 
 impl Far {
@@ -494,12 +509,14 @@ impl Far {
         for (run_worst, run_far) in runs {
             *worst = worst.max(run_worst);
             self.samples.extend(run_far.samples);
+            self.points.extend(run_far.points);
         }
     }
 
-    /// The position ids around the samples farther than `above` (distance alone), and the
-    /// corners of the `input` triangles (welded ids) that use them: what a collapse moved
-    /// there came from them. Sorted, without repeats.
+    /// The position ids around the samples farther than `above` (distance alone), the
+    /// position of `input` (the group's triangles, welded ids) nearest to each such input
+    /// sample, and the corners of the `input` triangles that use any of them: what a collapse
+    /// moved there came from them. Sorted, without repeats.
     fn hot(&self, mesh: &WeldedMesh, input: &[u32], above: f64) -> Vec<u32> {
         let above2 = (above * above) as f32;
         let mut hot: Vec<u32> = self.samples.iter().filter(|s| s.0 > above2).map(|s| s.1).collect();
@@ -507,6 +524,8 @@ impl Far {
             return hot;
         }
         let id = |v: u32| mesh.position_ids[v as usize];
+        let far_points = self.points.iter().filter(|p| p.0 > above2);
+        hot.extend(far_points.filter_map(|&(_, p)| nearest_vertex(mesh, input, p)).map(id));
         hot.sort_unstable();
         hot.dedup();
         let ring: Vec<u32> = input
@@ -520,6 +539,15 @@ impl Far {
         hot.dedup();
         hot
     }
+}
+
+/// The vertex of `input` (welded ids) nearest to `p`, if any.
+fn nearest_vertex(mesh: &WeldedMesh, input: &[u32], p: [f32; 3]) -> Option<u32> {
+    let d2 = |v: u32| {
+        let q = mesh.positions[v as usize];
+        (0..3).map(|k| (q[k] - p[k]) * (q[k] - p[k])).sum::<f32>()
+    };
+    input.iter().copied().min_by(|&a, &b| d2(a).total_cmp(&d2(b)))
 }
 
 /// The bounds of a measurement's input: its entries `tris` (object coordinates), and with
@@ -579,7 +607,10 @@ impl Limits {
 /// The input side of a measurement, in the group's local coordinates.
 struct InputSide<'a> {
     mesh: &'a WeldedMesh,
+    /// The group's centre, which `tris` are around.
+    center: [f32; 3],
     input: &'a [u32],
+    output: &'a [u32],
     tris: &'a [Triangle<f32>],
     duty: &'a [u8],
     errors: &'a [f32],
@@ -634,7 +665,10 @@ impl InputSide<'_> {
                     if d2 > enough {
                         worst = worst.max(limits.total(d2, e as f64));
                         if limits.record2.is_some_and(|h| d2 > h) {
-                            far.add(d2, t.iter().map(|&v| id(v)));
+                            let near = &self.output[3 * nearest..3 * nearest + 3];
+                            far.add(d2, t.iter().chain(near).map(|&v| id(v)));
+                            let p = sample_point(tri, b);
+                            far.points.push((d2, [0, 1, 2].map(|k| p[k] + self.center[k])));
                         }
                     }
                 }
@@ -918,6 +952,42 @@ mod tests {
         assert!(far.hot(&w, &input, worst).is_empty());
         let (_, none, _) = measure(&w, &sides, &output, &sizes, 0.0, None, None);
         assert!(none.hot(&w, &input, 0.0).is_empty());
+    }
+
+    #[test]
+    fn far_level0_samples_name_the_group_input_around_them() {
+        // Above level 1 a group's input is its members' triangles and its level-0 samples lie
+        // on triangles whose corners that input has mostly lost: here a small level-0 triangle
+        // under a tent whose peak is the only input position near it. A retry must lock the
+        // input there (the peak and its ring), not the lost corners, which lock nothing.
+        let small = [[0.45, 0.45, 0.9], [0.55, 0.45, 0.9], [0.5, 0.55, 0.9]];
+        let square = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+        let mut positions = square.to_vec();
+        positions.push([0.5, 0.5, 1.0]);
+        positions.extend(small);
+        let mesh = SourceMesh::positions_only(positions, vec![0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4, 5, 6, 7]);
+        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        let d2 = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>();
+        let at = |p: [f32; 3]| {
+            let from = |v: u32| d2(w.positions[v as usize], p);
+            (0..w.positions.len() as u32).min_by(|&a, &b| from(a).total_cmp(&from(b))).unwrap()
+        };
+        let (c, peak, level0) = (square.map(at), at([0.5, 0.5, 1.0]), small.map(at));
+        let input: Vec<u32> = (0..4).flat_map(|k| [c[k], c[(k + 1) % 4], peak]).collect();
+        let output = vec![c[0], c[1], c[2], c[0], c[2], c[3]];
+        let owned = [Owned::triangle(0, level0, 0x7f)];
+        let sides = Sides { input: &level0, triangle_errors: &[0.0], owned: Some(&owned), small: 0.0, members: &input };
+        let sizes = vec![10.0; w.position_count];
+        let original = Original::new(&w, &crate::partition::triangle_order(&w));
+        let (worst, far, _) = measure(&w, &sides, &output, &sizes, 0.0, Some(0.1), Some(&original));
+        assert!(worst > 0.85, "{worst}");
+        // Only the level-0 samples are that far: the output is within 0.5 of the tent.
+        let hot = far.hot(&w, &input, 0.6);
+        let id = |v: u32| w.position_ids[v as usize];
+        let mut all: Vec<u32> = input.iter().map(|&v| id(v)).collect();
+        all.sort_unstable();
+        all.dedup();
+        assert!(all.iter().all(|p| hot.binary_search(p).is_ok()), "{hot:?} lacks some of {all:?}");
     }
 
     #[test]
