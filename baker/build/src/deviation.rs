@@ -525,7 +525,7 @@ impl Far {
         }
         let id = |v: u32| mesh.position_ids[v as usize];
         let far_points = self.points.iter().filter(|p| p.0 > above2);
-        hot.extend(far_points.filter_map(|&(_, p)| nearest_vertex(mesh, input, p)).map(id));
+        hot.extend(far_points.filter_map(|&(_, p)| nearest_vertex(mesh, input.iter().copied(), p)).map(id));
         hot.sort_unstable();
         hot.dedup();
         let ring: Vec<u32> = input
@@ -541,13 +541,14 @@ impl Far {
     }
 }
 
-/// The vertex of `input` (welded ids) nearest to `p`, if any.
-fn nearest_vertex(mesh: &WeldedMesh, input: &[u32], p: [f32; 3]) -> Option<u32> {
+/// The vertex among `candidates` (welded ids) nearest to `p`, the first of equals; `None`
+/// without candidates.
+fn nearest_vertex(mesh: &WeldedMesh, candidates: impl IntoIterator<Item = u32>, p: [f32; 3]) -> Option<u32> {
     let d2 = |v: u32| {
         let q = mesh.positions[v as usize];
         (0..3).map(|k| (q[k] - p[k]) * (q[k] - p[k])).sum::<f32>()
     };
-    input.iter().copied().min_by(|&a, &b| d2(a).total_cmp(&d2(b)))
+    candidates.into_iter().min_by(|&a, &b| d2(a).total_cmp(&d2(b)))
 }
 
 /// The bounds of a measurement's input: its entries `tris` (object coordinates), and with
@@ -844,6 +845,11 @@ mod tests {
         assert_eq!(group_error(&w, &input, &input, &sizes, 0.0, 0.0), 0.0);
     }
 
+    /// The welded vertex nearest to `p` (weld snaps positions to its grid).
+    fn welded_at(w: &WeldedMesh, p: [f32; 3]) -> u32 {
+        nearest_vertex(w, 0..w.positions.len() as u32, p).unwrap()
+    }
+
     /// A bumpy `n` × `n` grid (welded) and a coarse output over every other vertex of it.
     fn bumpy(n: u32) -> (WeldedMesh, Vec<u32>) {
         let at = |x: u32, y: u32| y * (n + 1) + x;
@@ -863,9 +869,7 @@ mod tests {
         let mesh = SourceMesh::positions_only(positions, quads(1));
         let w = weld(&mesh, &BakeSettings::default()).unwrap();
         // Welded ids of the source's vertices: the nearest welded position (weld snaps them).
-        let d2 = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>();
-        let near = |v: u32, u: u32| d2(w.positions[u as usize], mesh.positions[v as usize]);
-        let id = |v: u32| (0..w.positions.len() as u32).min_by(|&a, &b| near(v, a).total_cmp(&near(v, b))).unwrap();
+        let id = |v: u32| welded_at(&w, mesh.positions[v as usize]);
         let output = quads(2).into_iter().map(id).collect();
         (w, output)
     }
@@ -967,11 +971,7 @@ mod tests {
         positions.extend(small);
         let mesh = SourceMesh::positions_only(positions, vec![0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4, 5, 6, 7]);
         let w = weld(&mesh, &BakeSettings::default()).unwrap();
-        let d2 = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>();
-        let at = |p: [f32; 3]| {
-            let from = |v: u32| d2(w.positions[v as usize], p);
-            (0..w.positions.len() as u32).min_by(|&a, &b| from(a).total_cmp(&from(b))).unwrap()
-        };
+        let at = |p: [f32; 3]| welded_at(&w, p);
         let (c, peak, level0) = (square.map(at), at([0.5, 0.5, 1.0]), small.map(at));
         let input: Vec<u32> = (0..4).flat_map(|k| [c[k], c[(k + 1) % 4], peak]).collect();
         let output = vec![c[0], c[1], c[2], c[0], c[2], c[3]];
@@ -1000,10 +1000,7 @@ mod tests {
         let indices = vec![0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4, 5, 6, 7, 8, 9, 10];
         let w = weld(&SourceMesh::positions_only(positions.clone(), indices), &BakeSettings::default()).unwrap();
         // Welded ids by nearest position (weld snaps to its grid).
-        let d2 = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>();
-        let near = |p: [f32; 3], u: u32| d2(w.positions[u as usize], p);
-        let at =
-            |p: [f32; 3]| (0..w.positions.len() as u32).min_by(|&a, &b| near(p, a).total_cmp(&near(p, b))).unwrap();
+        let at = |p: [f32; 3]| welded_at(&w, p);
         let input: Vec<u32> =
             [0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4, 5, 6, 7, 8, 9, 10].map(|v| at(positions[v])).to_vec();
         let output: Vec<u32> = [0, 1, 2, 0, 2, 3].map(|v| at(positions[v])).to_vec();
