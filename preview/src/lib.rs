@@ -23,7 +23,7 @@ pub mod fly;
 pub mod gpu_types;
 pub mod image;
 pub mod instances;
-pub mod lod_chain;
+pub use mres_check::lod_chain;
 pub mod scene;
 pub mod verify;
 pub mod viewer;

@@ -360,8 +360,8 @@ fn run(args: Args) -> Result<ExitCode> {
     if args.bench {
         let instances = preview::bench::grid_instances(&scene, args.grid);
         let started = std::time::Instant::now();
-        let chain =
-            preview::lod_chain::LodChain::build(&file, 128).with_context(|| format!("{}", args.file.display()))?;
+        let chain = preview::lod_chain::LodChain::build(&file, 128, usize::MAX)
+            .with_context(|| format!("{}", args.file.display()))?;
         println!(
             "LOD chain: {} levels ({} .. {} triangles) in {:.1} s",
             chain.levels.len(),

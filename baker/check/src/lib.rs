@@ -9,5 +9,6 @@
 pub mod conditioning;
 pub mod distance;
 pub mod honesty;
+pub mod lod_chain;
 pub mod tables;
 pub mod validate;

@@ -9,10 +9,12 @@
 //! [`mres_check::distance`]. From those (measured error, triangles) points, [`compare`]
 //! reads off the triangles each builder needs at [`TARGET_ERRORS`].
 
+use crate::view_cost::view_cost;
 use meshopt::clusterlod::{clod_build, clod_default_config, ClodMesh};
 use mres_build::bake::bake;
 use mres_build::settings::BakeSettings;
 use mres_check::distance::{two_sided_with, Distance, Surface, Triangle};
+use mres_check::lod_chain::LodChain;
 use mres_format::{rewrite, select, MresFile, PageCoding, FLAG_LAYOUT_PAGES, NO_GROUP};
 use mres_import::SourceMesh;
 use serde::{Deserialize, Serialize};
@@ -106,6 +108,10 @@ pub struct BuilderRun {
     /// The uniform cuts and their measured distances, finest first.
     #[serde(default)]
     pub cuts: Vec<CutPoint>,
+    /// What a renderer draws of our file at 1 px beside the LOD chain ([`crate::view_cost`];
+    /// ours only, with the quality measure).
+    #[serde(default)]
+    pub view: Option<crate::view_cost::ViewCost>,
 }
 
 /// A built DAG that can be cut: the run's figures, the largest finite stored error, and the
@@ -117,6 +123,8 @@ pub struct Built {
     pub coarsest: f32,
     /// Triangles of the uniform cut at a threshold.
     pub cut: Box<dyn Fn(f32) -> Vec<Triangle<f64>>>,
+    /// The baked file (ours only), for [`view`].
+    pub file: Option<std::rc::Rc<MresFile>>,
 }
 
 /// Peak RSS of this process (`VmHWM`), bytes.
@@ -178,6 +186,8 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
     };
     let coarsest = file.groups.iter().map(|g| g.error).filter(|e| e.is_finite()).fold(0.0, f32::max);
     let decoded = file.decode_all()?;
+    let file = std::rc::Rc::new(file);
+    let kept = Some(file.clone());
     let cut = move |t: f32| {
         let mut tris = Vec::new();
         for c in select::uniform_cut(&file.groups, &file.clusters, t) {
@@ -187,7 +197,15 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
         }
         tris
     };
-    Ok(Built { run, coarsest, cut: Box::new(cut) })
+    Ok(Built { run, coarsest, cut: Box::new(cut), file: kept })
+}
+
+/// Fills `run.view` from `file` (ours): the LOD chain of its level-0 mesh, each level's error
+/// measured with at most `max_samples` points per direction, and the view cost beside it.
+pub fn view(run: &mut BuilderRun, file: &MresFile, max_samples: usize) -> anyhow::Result<()> {
+    let chain = LodChain::build(file, 128, max_samples)?;
+    run.view = Some(view_cost(file, &chain));
+    Ok(())
 }
 
 /// MB of GPU layout per second decoding every page of `file` ([`MresFile::page`]: checksum,
@@ -296,7 +314,7 @@ pub fn run_clusterlod(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Resu
         let p = |i: u32| positions[i as usize].map(f64::from);
         dag.cut(t).flat_map(|c| dag.indices[c.2.clone()].chunks_exact(3).map(|t| [p(t[0]), p(t[1]), p(t[2])])).collect()
     };
-    Ok(Built { run, coarsest, cut: Box::new(cut) })
+    Ok(Built { run, coarsest, cut: Box::new(cut), file: None })
 }
 
 /// Cuts `built` at [`relative_thresholds`] and at its coarsest cut, and measures each cut

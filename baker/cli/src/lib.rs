@@ -10,3 +10,4 @@ pub mod generate;
 pub mod inspect;
 pub mod log;
 pub mod tree;
+pub mod view_cost;

@@ -4,6 +4,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use mres_build::BakeSettings;
+use mres_check::lod_chain::LodChain;
 use mres_check::validate::{validate, Thresholds, ValidateOptions};
 use mres_cli::bench::{self, compare, measure, run_clusterlod, run_mres, BuilderRun, Report};
 use mres_cli::inspect::summarize;
@@ -106,6 +107,11 @@ struct InspectArgs {
     /// Print the same summary as JSON on stdout instead of text.
     #[arg(long)]
     json: bool,
+    /// Also what a renderer draws of the file at 1 px beside a discrete LOD chain of its
+    /// level-0 mesh (triangles per copy over copies seen from near to far; as `mres bench`
+    /// reports it). Builds and measures the chain: seconds on a million triangles.
+    #[arg(long)]
+    view: bool,
 }
 
 #[derive(Args)]
@@ -457,15 +463,29 @@ fn print_validate(file: &Path, report: &mres_check::validate::Report, level0: u6
 fn inspect_cmd(a: InspectArgs) -> Result<ExitCode> {
     let f = open(&a.file)?;
     let summary = summarize(&f).with_context(|| format!("{}", a.file.display()))?;
+    let view = match a.view {
+        true => {
+            let chain =
+                LodChain::build(&f, 128, bench::DEFAULT_SAMPLES).with_context(|| format!("{}", a.file.display()))?;
+            Some(mres_cli::view_cost::view_cost(&f, &chain))
+        }
+        false => None,
+    };
     if a.json {
         let mut value = serde_json::to_value(&summary)?;
         if let Some(object) = value.as_object_mut() {
             object.insert("file".into(), a.file.display().to_string().into());
+            if let Some(v) = &view {
+                object.insert("view".into(), serde_json::to_value(v)?);
+            }
         }
         println!("{}", serde_json::to_string_pretty(&value)?);
     } else {
         println!("{}", a.file.display());
         print!("{}", summary.render());
+        if let Some(v) = &view {
+            print_view(v);
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -620,7 +640,12 @@ fn bench_child_cmd(a: BenchChildArgs) -> Result<ExitCode> {
         // Imported again after the build so that the reference surface stays out of the
         // builder's peak RSS (read before this).
         let input = mres_check::distance::Surface::new(bench::triangles(&import()?));
-        measure(built, &input, a.samples)
+        let file = built.file.clone();
+        let mut run = measure(built, &input, a.samples);
+        if let Some(file) = file {
+            bench::view(&mut run, &file, a.samples)?;
+        }
+        run
     };
     println!("{}", serde_json::to_string(&run)?);
     Ok(ExitCode::SUCCESS)
@@ -718,6 +743,26 @@ fn print_bench(a: &BenchArgs, r: &Report) {
     if a.samples > 0 {
         print_quality(a, r);
     }
+    if let Some(v) = &r.runs[0].view {
+        print_view(v);
+    }
+}
+
+/// What a renderer draws of our file beside the LOD chain.
+fn print_view(v: &mres_cli::view_cost::ViewCost) {
+    use mres_cli::view_cost::{FOV_Y_DEGREES, HEIGHT_PX, RANGE_RADII, TAU_PX};
+    println!(
+        "\nview cost at {TAU_PX} px ({HEIGHT_PX} px high, {FOV_Y_DEGREES} degree fov; copies {}-{} radii away, \
+         weighted as on a ground grid; selection by stored errors): mres {:.0} triangles per copy, \
+         LOD chain {:.0} ({} levels, measured errors): ratio {:.3}; full detail {}",
+        RANGE_RADII.0,
+        RANGE_RADII.1,
+        v.dag_triangles,
+        v.chain_triangles,
+        v.chain_errors.len(),
+        v.ratio(),
+        v.full_triangles
+    );
 }
 
 /// The triangles both builders need at equal measured error, per measure.

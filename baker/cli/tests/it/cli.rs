@@ -112,6 +112,12 @@ fn bench_compares_with_clusterlod() {
         assert!(r["peak_rss_bytes"].as_u64().unwrap() > 0);
     }
     assert_eq!(report["quality"]["targets"].as_array().unwrap().len(), 5);
+    // The view cost beside the LOD chain, ours only.
+    let view = &runs[0]["view"];
+    assert_eq!(view["full_triangles"], 3072, "{view}");
+    assert!(view["dag_triangles"].as_f64().unwrap() > 0.0 && view["chain_triangles"].as_f64().unwrap() > 0.0);
+    assert!(runs[1]["view"].is_null());
+    assert!(text(&o).contains("view cost at 1 px"), "{}", text(&o));
 }
 
 #[test]

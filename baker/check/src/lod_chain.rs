@@ -1,4 +1,5 @@
-//! The discrete-LOD alternative of the benchmark: the file's level-0 mesh welded by grid
+//! The discrete-LOD alternative of the benchmarks (`preview --bench` on the GPU, `mres bench`'s
+//! view cost on the CPU): the file's level-0 mesh welded by grid
 //! coordinate, then simplified with meshoptimizer (`meshopt::simplify`) to half the triangles
 //! per level, each level with its object-space error: the two-sided distance between the level
 //! and the original, measured as the validator measures a DAG cut (`mres_check::distance`:
@@ -8,8 +9,8 @@
 
 use std::collections::HashMap;
 
+use crate::distance::{two_sided_with, Surface};
 use anyhow::{Context as _, Result};
-use mres_check::distance::{two_sided_with, Surface};
 use mres_format::{MresFile, NO_GROUP};
 
 /// One level of the chain: a range of the shared index buffer.
@@ -37,7 +38,9 @@ pub struct LodChain {
 impl LodChain {
     /// Builds the chain from `file`'s level-0 clusters: halves the triangle count per level
     /// until fewer than `min_triangles` remain, simplification stalls, or 20 levels exist.
-    pub fn build(file: &MresFile, min_triangles: usize) -> Result<LodChain> {
+    /// Each level's error is measured with at most `max_samples` points per direction
+    /// (`usize::MAX`: every sample, as the validator measures).
+    pub fn build(file: &MresFile, min_triangles: usize, max_samples: usize) -> Result<LodChain> {
         let mut weld: HashMap<[i32; 3], u32> = HashMap::new();
         let mut positions = Vec::new();
         let mut base = Vec::new();
@@ -61,7 +64,7 @@ impl LodChain {
                 base.extend(decoded.indices.iter().map(|&i| ids[i as usize]));
             }
         }
-        let bytes: &[u8] = bytemuck::cast_slice(&positions);
+        let bytes = meshopt::typed_to_bytes(&positions);
         let adapter = meshopt::VertexDataAdapter::new(bytes, 12, 0).context("vertex adapter")?;
         let mut indices = base.clone();
         let mut levels = vec![ChainLevel { first_index: 0, index_count: base.len() as u32, error: 0.0 }];
@@ -85,7 +88,7 @@ impl LodChain {
                 break;
             }
             // Measured against the original, every sample (rounded up to f32), monotone.
-            let measured = two_sided_with(&triangles(&next), &original, usize::MAX).max;
+            let measured = two_sided_with(&triangles(&next), &original, max_samples).max;
             let rounded = measured as f32;
             let rounded = if (rounded as f64) < measured { rounded.next_up() } else { rounded };
             error = error.max(rounded);
