@@ -1,11 +1,13 @@
 //! The discrete-LOD alternative of the benchmarks (`preview --bench` on the GPU, `mres bench`'s
-//! view cost on the CPU): the file's level-0 mesh welded by grid
-//! coordinate, then simplified with meshoptimizer (`meshopt::simplify`) to half the triangles
-//! per level, each level with its object-space error: the two-sided distance between the level
-//! and the original, measured as the validator measures a DAG cut (`mres_check::distance`:
-//! every triangle's centroid and edge midpoints, both ways), made monotone. Both sides of the
-//! comparison are then honest, and compared at the same measure. A renderer picks one level per instance by the same screen-space error rule
-//! as the DAG (coarsest level whose projected error is ≤ τ at the instance's nearest point).
+//! view cost on the CPU): the file's level-0 mesh welded by vertex (grid position, normal, UV),
+//! then simplified with meshoptimizer (`simplify_with_attributes`, the baker's attribute
+//! weights; permissive across seams where a halving stalls) to half the triangles per level,
+//! each level with its object-space error: the two-sided distance between the level and the
+//! original, measured as the validator measures a DAG cut (`crate::distance`: every triangle's
+//! centroid and edge midpoints, both ways), made monotone. Both sides of the comparison are then
+//! honest, and compared at the same measure. A renderer picks one level per instance by the
+//! same screen-space error rule as the DAG (coarsest level whose projected error is ≤ τ at the
+//! instance's nearest point).
 
 use std::collections::HashMap;
 
@@ -41,29 +43,10 @@ impl LodChain {
     /// Each level's error is measured with at most `max_samples` points per direction
     /// (`usize::MAX`: every sample, as the validator measures).
     pub fn build(file: &MresFile, min_triangles: usize, max_samples: usize) -> Result<LodChain> {
-        let mut weld: HashMap<[i32; 3], u32> = HashMap::new();
-        let mut positions = Vec::new();
-        let mut base = Vec::new();
-        for (p, info) in file.pages.iter().enumerate() {
-            let raw = file.page(p as u32).with_context(|| format!("page {p}"))?;
-            for c in info.first_cluster..info.first_cluster + info.cluster_count {
-                if file.clusters[c as usize].own_group != NO_GROUP {
-                    continue;
-                }
-                let decoded = file.decode_cluster(&raw, c).with_context(|| format!("page {p}"))?;
-                let ids: Vec<u32> = decoded
-                    .positions
-                    .iter()
-                    .map(|&q| {
-                        *weld.entry(q).or_insert_with(|| {
-                            positions.push(file.header.grid.decode(q));
-                            positions.len() as u32 - 1
-                        })
-                    })
-                    .collect();
-                base.extend(decoded.indices.iter().map(|&i| ids[i as usize]));
-            }
-        }
+        let Level0 { positions, attributes, base } = Level0::of(file)?;
+        let weights = vec![ATTRIBUTE_WEIGHT; attributes.len() / positions.len().max(1)];
+        // No vertex is locked (an empty list would be read as one: the binding passes its pointer).
+        let unlocked = vec![false; positions.len()];
         let bytes = meshopt::typed_to_bytes(&positions);
         let adapter = meshopt::VertexDataAdapter::new(bytes, 12, 0).context("vertex adapter")?;
         let mut indices = base.clone();
@@ -83,8 +66,34 @@ impl LodChain {
         let mut error = 0.0f32;
         while current.len() / 3 >= min_triangles.max(2) && levels.len() < 20 {
             let target = (current.len() / 2 / 3 * 3).max(3);
-            let next = meshopt::simplify(&current, &adapter, target, 1.0, meshopt::SimplifyOptions::None, None);
-            if next.is_empty() || next.len() * 10 > current.len() * 9 {
+            let simplify = |options| {
+                let (stride, unlocked) = (weights.len() * 4, &unlocked[..]);
+                meshopt::simplify_with_attributes_and_locks(
+                    &current,
+                    &adapter,
+                    &attributes,
+                    &weights,
+                    stride,
+                    unlocked,
+                    target,
+                    1.0,
+                    options,
+                    None,
+                )
+            };
+            let next = if weights.is_empty() {
+                meshopt::simplify(&current, &adapter, target, 1.0, meshopt::SimplifyOptions::None, None)
+            } else {
+                // Where the seams stop it, across them (as the baker's stuck groups do), so that
+                // the chain reaches as few triangles as the DAG's top.
+                let regular = simplify(meshopt::SimplifyOptions::None);
+                if stalls(&regular, &current) {
+                    simplify(meshopt::SimplifyOptions::Permissive)
+                } else {
+                    regular
+                }
+            };
+            if stalls(&next, &current) {
                 break;
             }
             // Measured against the original, every sample (rounded up to f32), monotone.
@@ -97,5 +106,68 @@ impl LodChain {
             current = next;
         }
         Ok(LodChain { positions, indices, levels })
+    }
+}
+
+/// Whether a level `next` simplified from `current` keeps too much to be a level: over 90 %.
+fn stalls(next: &[u32], current: &[u32]) -> bool {
+    next.is_empty() || next.len() * 10 > current.len() * 9
+}
+
+/// Weight of each attribute component (normal xyz, UV scaled to the file's UV range) against
+/// positions in the chain's simplification: the baker's default `normal_weight` and
+/// `uv_weight`, so that the chain keeps the attributes' seams and shading as the DAG does.
+const ATTRIBUTE_WEIGHT: f32 = 0.5;
+
+/// A file's level-0 mesh, welded by vertex (grid position, normal and UV: a seam keeps its
+/// copies, as a shipped LOD chain's mesh does; welded by position alone, the chain simplified
+/// across the normal seams of hard-edged parts the DAG keeps, and drew 0.6× the triangles the
+/// attribute-aware chain does on the flight helmet).
+struct Level0 {
+    positions: Vec<[f32; 3]>,
+    /// Per vertex, its normal then its UV scaled to the file's UV range, where the file has them.
+    attributes: Vec<f32>,
+    base: Vec<u32>,
+}
+
+impl Level0 {
+    fn of(file: &MresFile) -> Result<Level0> {
+        let mut weld: HashMap<([i32; 3], [u32; 5]), u32> = HashMap::new();
+        let (mut positions, mut attributes, mut base) = (Vec::new(), Vec::new(), Vec::new());
+        let uv = file.header.uv;
+        let scaled =
+            |t: [f32; 2]| [0, 1].map(|k| if uv.extent[k] > 0.0 { (t[k] - uv.min[k]) / uv.extent[k] } else { 0.0 });
+        for (p, info) in file.pages.iter().enumerate() {
+            let raw = file.page(p as u32).with_context(|| format!("page {p}"))?;
+            for c in info.first_cluster..info.first_cluster + info.cluster_count {
+                if file.clusters[c as usize].own_group != NO_GROUP {
+                    continue;
+                }
+                let d = file.decode_cluster(&raw, c).with_context(|| format!("page {p}"))?;
+                let ids: Vec<u32> = (0..d.positions.len())
+                    .map(|v| {
+                        let row: Vec<f32> = d
+                            .normals
+                            .get(v)
+                            .into_iter()
+                            .flatten()
+                            .copied()
+                            .chain(d.uvs.get(v).map(|&t| scaled(t)).into_iter().flatten())
+                            .collect();
+                        let mut bits = [0u32; 5];
+                        for (b, x) in bits.iter_mut().zip(&row) {
+                            *b = x.to_bits();
+                        }
+                        *weld.entry((d.positions[v], bits)).or_insert_with(|| {
+                            positions.push(file.header.grid.decode(d.positions[v]));
+                            attributes.extend_from_slice(&row);
+                            positions.len() as u32 - 1
+                        })
+                    })
+                    .collect();
+                base.extend(d.indices.iter().map(|&i| ids[i as usize]));
+            }
+        }
+        Ok(Level0 { positions, attributes, base })
     }
 }
