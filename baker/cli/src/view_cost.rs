@@ -14,9 +14,11 @@
 //! directions (the axes and the cube's diagonals) at [`DISTANCES`] distances from 3 r to 230 r
 //! (the range the preview's 100 × 100 grid shows, spaced 2.5 r), log-spaced and weighted as
 //! copies on a ground plane are (their number grows with the distance: weight ∝ distance² per
-//! log step). Each copy is whole in view, as most of the grid's are where frustum culling
-//! leaves them; per copy the DAG draws its view cut and the chain its coarsest level whose
-//! projected error is at most τ at the sphere's nearest point.
+//! log step). Per copy the DAG draws its view cut and the chain its coarsest level whose
+//! projected error is at most τ at the sphere's nearest point. Each copy is whole in view: the
+//! grid's nearest copies are partly off screen, where the GPU culls the DAG's clusters one by
+//! one and the chain's copies whole, so this counts against the DAG where near copies weigh
+//! most (a card field: 1.25 of the chain here, about 0.5 on the grid; docs/BENCHMARKS.md).
 
 use mres_check::lod_chain::LodChain;
 use mres_format::select::{projected_error, view_cut, ViewParams};
