@@ -44,59 +44,21 @@ impl LodChain {
     /// (`usize::MAX`: every sample, as the validator measures).
     pub fn build(file: &MresFile, min_triangles: usize, max_samples: usize) -> Result<LodChain> {
         let Level0 { positions, attributes, base } = Level0::of(file)?;
-        let weights = vec![ATTRIBUTE_WEIGHT; attributes.len() / positions.len().max(1)];
-        // No vertex is locked (an empty list would be read as one: the binding passes its pointer).
-        let unlocked = vec![false; positions.len()];
-        let bytes = meshopt::typed_to_bytes(&positions);
-        let adapter = meshopt::VertexDataAdapter::new(bytes, 12, 0).context("vertex adapter")?;
+        let halve = Halving::new(&positions, &attributes)?;
         let mut indices = base.clone();
         let mut levels = vec![ChainLevel { first_index: 0, index_count: base.len() as u32, error: 0.0 }];
-        let tri = |t: &[u32]| t.iter().map(|&v| positions[v as usize].map(f64::from)).collect::<Vec<_>>();
         let triangles = |indices: &[u32]| -> Vec<[[f64; 3]; 3]> {
-            indices
-                .chunks_exact(3)
-                .map(|t| {
-                    let p = tri(t);
-                    [p[0], p[1], p[2]]
-                })
-                .collect()
+            indices.chunks_exact(3).map(|t| [0, 1, 2].map(|k| positions[t[k] as usize].map(f64::from))).collect()
         };
         let original = Surface::new(triangles(&base));
         let mut current = base;
         let mut error = 0.0f32;
         while current.len() / 3 >= min_triangles.max(2) && levels.len() < 20 {
-            let target = (current.len() / 2 / 3 * 3).max(3);
-            let simplify = |options| {
-                let (stride, unlocked) = (weights.len() * 4, &unlocked[..]);
-                meshopt::simplify_with_attributes_and_locks(
-                    &current,
-                    &adapter,
-                    &attributes,
-                    &weights,
-                    stride,
-                    unlocked,
-                    target,
-                    1.0,
-                    options,
-                    None,
-                )
-            };
-            let next = if weights.is_empty() {
-                meshopt::simplify(&current, &adapter, target, 1.0, meshopt::SimplifyOptions::None, None)
-            } else {
-                // Where the seams stop it, across them (as the baker's stuck groups do), so that
-                // the chain reaches as few triangles as the DAG's top.
-                let regular = simplify(meshopt::SimplifyOptions::None);
-                if stalls(&regular, &current) {
-                    simplify(meshopt::SimplifyOptions::Permissive)
-                } else {
-                    regular
-                }
-            };
+            let next = halve.run(&current);
             if stalls(&next, &current) {
                 break;
             }
-            // Measured against the original, every sample (rounded up to f32), monotone.
+            // Measured against the original (rounded up to f32), monotone.
             let measured = two_sided_with(&triangles(&next), &original, max_samples).max;
             let rounded = measured as f32;
             let rounded = if (rounded as f64) < measured { rounded.next_up() } else { rounded };
@@ -106,6 +68,46 @@ impl LodChain {
             current = next;
         }
         Ok(LodChain { positions, indices, levels })
+    }
+}
+
+/// One level's simplification: half the triangles, attributes weighted where the file has them.
+struct Halving<'a> {
+    adapter: meshopt::VertexDataAdapter<'a>,
+    attributes: &'a [f32],
+    weights: Vec<f32>,
+    /// No vertex is locked (an empty list would be read as one: the binding passes its pointer).
+    unlocked: Vec<bool>,
+}
+
+impl<'a> Halving<'a> {
+    fn new(positions: &'a [[f32; 3]], attributes: &'a [f32]) -> Result<Halving<'a>> {
+        let adapter =
+            meshopt::VertexDataAdapter::new(meshopt::typed_to_bytes(positions), 12, 0).context("vertex adapter")?;
+        let weights = vec![ATTRIBUTE_WEIGHT; attributes.len() / positions.len().max(1)];
+        Ok(Halving { adapter, attributes, weights, unlocked: vec![false; positions.len()] })
+    }
+
+    /// `current` simplified to about half its triangles; where the seams stop that, across
+    /// them (as the baker's stuck groups are), so that the chain gets as coarse as the DAG's top.
+    fn run(&self, current: &[u32]) -> Vec<u32> {
+        let target = (current.len() / 2 / 3 * 3).max(3);
+        if self.weights.is_empty() {
+            return meshopt::simplify(current, &self.adapter, target, 1.0, meshopt::SimplifyOptions::None, None);
+        }
+        let simplify = |options| {
+            let (attributes, weights, stride) = (self.attributes, &self.weights[..], self.weights.len() * 4);
+            let (adapter, unlocked) = (&self.adapter, &self.unlocked[..]);
+            meshopt::simplify_with_attributes_and_locks(
+                current, adapter, attributes, weights, stride, unlocked, target, 1.0, options, None,
+            )
+        };
+        let regular = simplify(meshopt::SimplifyOptions::None);
+        if stalls(&regular, current) {
+            simplify(meshopt::SimplifyOptions::Permissive)
+        } else {
+            regular
+        }
     }
 }
 
@@ -121,8 +123,8 @@ const ATTRIBUTE_WEIGHT: f32 = 0.5;
 
 /// A file's level-0 mesh, welded by vertex (grid position, normal and UV: a seam keeps its
 /// copies, as a shipped LOD chain's mesh does; welded by position alone, the chain simplified
-/// across the normal seams of hard-edged parts the DAG keeps, and drew 0.6× the triangles the
-/// attribute-aware chain does on the flight helmet).
+/// across the normal seams of hard-edged parts the DAG keeps, and drew about half the triangles
+/// the attribute-aware chain draws of the flight helmet: docs/BENCHMARKS.md "View cost").
 struct Level0 {
     positions: Vec<[f32; 3]>,
     /// Per vertex, its normal then its UV scaled to the file's UV range, where the file has them.
