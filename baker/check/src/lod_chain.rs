@@ -148,21 +148,15 @@ impl Level0 {
                 let d = file.decode_cluster(&raw, c).with_context(|| format!("page {p}"))?;
                 let ids: Vec<u32> = (0..d.positions.len())
                     .map(|v| {
-                        let row: Vec<f32> = d
-                            .normals
-                            .get(v)
-                            .into_iter()
-                            .flatten()
-                            .copied()
-                            .chain(d.uvs.get(v).map(|&t| scaled(t)).into_iter().flatten())
-                            .collect();
-                        let mut bits = [0u32; 5];
-                        for (b, x) in bits.iter_mut().zip(&row) {
-                            *b = x.to_bits();
+                        let normal = d.normals.get(v).into_iter().flatten().copied();
+                        let uv = d.uvs.get(v).map(|&t| scaled(t)).into_iter().flatten();
+                        let (mut row, mut width) = ([0.0f32; 5], 0);
+                        for (slot, x) in row.iter_mut().zip(normal.chain(uv)) {
+                            (*slot, width) = (x, width + 1);
                         }
-                        *weld.entry((d.positions[v], bits)).or_insert_with(|| {
+                        *weld.entry((d.positions[v], row.map(f32::to_bits))).or_insert_with(|| {
                             positions.push(file.header.grid.decode(d.positions[v]));
-                            attributes.extend_from_slice(&row);
+                            attributes.extend_from_slice(&row[..width]);
                             positions.len() as u32 - 1
                         })
                     })

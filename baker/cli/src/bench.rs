@@ -9,12 +9,10 @@
 //! [`mres_check::distance`]. From those (measured error, triangles) points, [`compare`]
 //! reads off the triangles each builder needs at [`TARGET_ERRORS`].
 
-use crate::view_cost::view_cost;
 use meshopt::clusterlod::{clod_build, clod_default_config, ClodMesh};
 use mres_build::bake::bake;
 use mres_build::settings::BakeSettings;
 use mres_check::distance::{two_sided_with, Distance, Surface, Triangle};
-use mres_check::lod_chain::LodChain;
 use mres_format::{rewrite, select, MresFile, PageCoding, FLAG_LAYOUT_PAGES, NO_GROUP};
 use mres_import::SourceMesh;
 use serde::{Deserialize, Serialize};
@@ -123,7 +121,7 @@ pub struct Built {
     pub coarsest: f32,
     /// Triangles of the uniform cut at a threshold.
     pub cut: Box<dyn Fn(f32) -> Vec<Triangle<f64>>>,
-    /// The baked file (ours only), for [`view`].
+    /// The baked file (ours only), for [`crate::view_cost::of_file`].
     pub file: Option<std::rc::Rc<MresFile>>,
 }
 
@@ -198,14 +196,6 @@ pub fn run_mres(mesh: SourceMesh, settings: &BakeSettings) -> anyhow::Result<Bui
         tris
     };
     Ok(Built { run, coarsest, cut: Box::new(cut), file: kept })
-}
-
-/// Fills `run.view` from `file` (ours): the LOD chain of its level-0 mesh, each level's error
-/// measured with at most `max_samples` points per direction, and the view cost beside it.
-pub fn view(run: &mut BuilderRun, file: &MresFile, max_samples: usize) -> anyhow::Result<()> {
-    let chain = LodChain::build(file, 128, max_samples)?;
-    run.view = Some(view_cost(file, &chain));
-    Ok(())
 }
 
 /// MB of GPU layout per second decoding every page of `file` ([`MresFile::page`]: checksum,

@@ -23,6 +23,7 @@
 use mres_check::lod_chain::LodChain;
 use mres_format::select::{projected_error, view_cut, ViewParams};
 use mres_format::{MresFile, Sphere};
+use mres_import::mesh::bounds;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -61,6 +62,12 @@ impl ViewCost {
     pub fn ratio(&self) -> f64 {
         self.dag_triangles / self.chain_triangles.max(1.0)
     }
+}
+
+/// The view cost of `file` beside its LOD chain (down to 128 triangles), each chain level's
+/// error measured with at most `max_samples` points per direction.
+pub fn of_file(file: &MresFile, max_samples: usize) -> anyhow::Result<ViewCost> {
+    Ok(view_cost(file, &LodChain::build(file, 128, max_samples)?))
 }
 
 /// The view cost of `file` beside `chain` (built from the same file).
@@ -130,15 +137,7 @@ fn normalized(v: [f32; 3]) -> [f32; 3] {
 
 /// The sphere around the centre of `points`' box reaching the farthest of them.
 fn bounding_sphere(points: &[[f32; 3]]) -> Sphere {
-    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-    for p in points {
-        for k in 0..3 {
-            (lo[k], hi[k]) = (lo[k].min(p[k]), hi[k].max(p[k]));
-        }
-    }
-    if points.is_empty() {
-        return Sphere { center: [0.0; 3], radius: 0.0 };
-    }
+    let Some((lo, hi)) = bounds(points) else { return Sphere { center: [0.0; 3], radius: 0.0 } };
     let center = [0, 1, 2].map(|k| lo[k] * 0.5 + hi[k] * 0.5);
     let d2 = |p: &[f32; 3]| (0..3).map(|k| (p[k] - center[k]) as f64 * (p[k] - center[k]) as f64).sum::<f64>();
     let radius = points.iter().map(d2).fold(0.0, f64::max).sqrt() as f32;

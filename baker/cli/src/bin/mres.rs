@@ -4,10 +4,10 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use mres_build::BakeSettings;
-use mres_check::lod_chain::LodChain;
 use mres_check::validate::{validate, Thresholds, ValidateOptions};
 use mres_cli::bench::{self, compare, measure, run_clusterlod, run_mres, BuilderRun, Report};
 use mres_cli::inspect::summarize;
+use mres_cli::view_cost;
 use mres_format::{select, MresFile};
 use mres_import::SourceMesh;
 use std::io::Write;
@@ -464,11 +464,7 @@ fn inspect_cmd(a: InspectArgs) -> Result<ExitCode> {
     let f = open(&a.file)?;
     let summary = summarize(&f).with_context(|| format!("{}", a.file.display()))?;
     let view = match a.view {
-        true => {
-            let chain =
-                LodChain::build(&f, 128, bench::DEFAULT_SAMPLES).with_context(|| format!("{}", a.file.display()))?;
-            Some(mres_cli::view_cost::view_cost(&f, &chain))
-        }
+        true => Some(view_cost::of_file(&f, bench::DEFAULT_SAMPLES).with_context(|| format!("{}", a.file.display()))?),
         false => None,
     };
     if a.json {
@@ -643,7 +639,7 @@ fn bench_child_cmd(a: BenchChildArgs) -> Result<ExitCode> {
         let file = built.file.clone();
         let mut run = measure(built, &input, a.samples);
         if let Some(file) = file {
-            bench::view(&mut run, &file, a.samples)?;
+            run.view = Some(view_cost::of_file(&file, a.samples)?);
         }
         run
     };
@@ -749,8 +745,8 @@ fn print_bench(a: &BenchArgs, r: &Report) {
 }
 
 /// What a renderer draws of our file beside the LOD chain.
-fn print_view(v: &mres_cli::view_cost::ViewCost) {
-    use mres_cli::view_cost::{FOV_Y_DEGREES, HEIGHT_PX, RANGE_RADII, TAU_PX};
+fn print_view(v: &view_cost::ViewCost) {
+    use view_cost::{FOV_Y_DEGREES, HEIGHT_PX, RANGE_RADII, TAU_PX};
     println!(
         "\nview cost at {TAU_PX} px ({HEIGHT_PX} px high, {FOV_Y_DEGREES} degree fov; copies {}-{} radii away, \
          weighted as on a ground grid; selection by stored errors): mres {:.0} triangles per copy, \
