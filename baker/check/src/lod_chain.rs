@@ -133,12 +133,19 @@ struct Level0 {
 }
 
 impl Level0 {
+    /// The level-0 mesh in a canonical order: vertices by (grid position, attribute bits),
+    /// each triangle rotated to start at its least vertex (winding kept), triangles sorted. The
+    /// chain then depends on the level-0 surface alone, not on how the baker laid its clusters
+    /// into pages: in file order, meshoptimizer's simplification (and the sample stride of the
+    /// level measure) followed the page layout, and two bakes with the same level 0 gave chains
+    /// 20–35 % apart in the view cost (docs/BENCHMARKS.md "View cost").
     fn of(file: &MresFile) -> Result<Level0> {
         let mut weld: HashMap<([i32; 3], [u32; 5]), u32> = HashMap::new();
-        let (mut positions, mut attributes, mut base) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut keys, mut base) = (Vec::new(), Vec::new());
         let uv = file.header.uv;
         let scaled =
             |t: [f32; 2]| [0, 1].map(|k| if uv.extent[k] > 0.0 { (t[k] - uv.min[k]) / uv.extent[k] } else { 0.0 });
+        let mut width = 0;
         for (p, info) in file.pages.iter().enumerate() {
             let raw = file.page(p as u32).with_context(|| format!("page {p}"))?;
             for c in info.first_cluster..info.first_cluster + info.cluster_count {
@@ -150,20 +157,40 @@ impl Level0 {
                     .map(|v| {
                         let normal = d.normals.get(v).into_iter().flatten().copied();
                         let uv = d.uvs.get(v).map(|&t| scaled(t)).into_iter().flatten();
-                        let (mut row, mut width) = ([0.0f32; 5], 0);
+                        let mut row = [0.0f32; 5];
+                        width = 0;
                         for (slot, x) in row.iter_mut().zip(normal.chain(uv)) {
                             (*slot, width) = (x, width + 1);
                         }
-                        *weld.entry((d.positions[v], row.map(f32::to_bits))).or_insert_with(|| {
-                            positions.push(file.header.grid.decode(d.positions[v]));
-                            attributes.extend_from_slice(&row[..width]);
-                            positions.len() as u32 - 1
+                        let key = (d.positions[v], row.map(f32::to_bits));
+                        *weld.entry(key).or_insert_with(|| {
+                            keys.push(key);
+                            keys.len() as u32 - 1
                         })
                     })
                     .collect();
                 base.extend(d.indices.iter().map(|&i| ids[i as usize]));
             }
         }
-        Ok(Level0 { positions, attributes, base })
+        // Canonical vertex numbers: rank of each vertex's key.
+        let mut order: Vec<u32> = (0..keys.len() as u32).collect();
+        order.sort_unstable_by_key(|&v| keys[v as usize]);
+        let mut rank = vec![0u32; keys.len()];
+        for (r, &v) in order.iter().enumerate() {
+            rank[v as usize] = r as u32;
+        }
+        let positions = order.iter().map(|&v| file.header.grid.decode(keys[v as usize].0)).collect();
+        let attributes =
+            order.iter().flat_map(|&v| keys[v as usize].1[..width].iter().map(|&b| f32::from_bits(b))).collect();
+        let mut triangles: Vec<[u32; 3]> = base
+            .chunks_exact(3)
+            .map(|t| {
+                let t = [rank[t[0] as usize], rank[t[1] as usize], rank[t[2] as usize]];
+                let least = (0..3).min_by_key(|&k| t[k]).unwrap_or(0);
+                [t[least], t[(least + 1) % 3], t[(least + 2) % 3]]
+            })
+            .collect();
+        triangles.sort_unstable();
+        Ok(Level0 { positions, attributes, base: triangles.concat() })
     }
 }
