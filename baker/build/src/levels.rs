@@ -27,22 +27,11 @@ use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 /// simplified further (an open boundary is locked in every cut) ends in one root group of up
 /// to this many clusters; beyond it, several root groups are formed and reported.
 pub const MAX_ROOT_CLUSTERS: usize = 256;
-/// `always_locked` reason: on a shard or cell border (never unlocked in that cell).
-const CELL_BORDER: u8 = 1;
-/// `always_locked` reason: on a non-manifold edge (unlocked for a stuck group, see
-/// [`Builder::simplify_parts`]).
-const NON_MANIFOLD: u8 = 2;
 /// A stuck top of at most this many clusters is simplified as one group (the validator's
 /// largest group size, docs/INVARIANTS.md §3).
 const FORCED_GROUP_CLUSTERS: usize = 32;
 /// `owner` of a position used by two or more groups of a level.
 const SHARED: u32 = u32::MAX - 1;
-/// A group's simplification whose error exceeds this many times its members' error, while
-/// it holds positions locked only as non-manifold, is tried again with those unlocked (see
-/// [`Builder::simplify_rounds`]): the edges left locked can leave a group nothing to collapse
-/// but its corners (a wall standing on a floor: 5.03 against 5.9e-4). Chosen on four inputs
-/// with non-manifold edges (docs/BENCHMARKS.md, "A wall standing inside a floor").
-const JUMP: f32 = 2.0;
 /// The root chain ([`Builder::step`]) stops at a lone cluster of at most this many
 /// triangles: below, a link saves a few triangles for a level's header and group.
 const ROOT_CHAIN_TRIANGLES: usize = 16;
@@ -56,54 +45,43 @@ struct Simplified {
     method: Method,
 }
 
-/// A part's simplification that a level keeps, with the `lock` of the round that made it
-/// (which [`always_locked`] reasons held); `None` where stuck.
-type Kept = Option<(simplify::Simplified, u8)>;
+/// A part's simplification that a level keeps, and whether the run that made it was lenient
+/// (a stuck group's retry, see [`Builder::simplify_rounds`]); `None` where stuck.
+type Kept = Option<(simplify::Simplified, bool)>;
 
 /// What a level's groups must keep: the positions two groups use (the group borders), the
-/// positions [`always_locked`] for the reasons a round holds, and which chords a group may add
-/// (see [`crate::chords`]).
+/// positions on a cell border ([`cell_borders`]), and which chords a group may add (see
+/// [`crate::chords`]).
 struct LevelLocks<'a> {
     mesh: &'a WeldedMesh,
-    always_locked: &'a [u8],
+    cell_border: &'a [bool],
     /// Per position id, the one group using it, or [`SHARED`].
     owner: Vec<AtomicU32>,
     chords: Chords,
 }
 
 impl<'a> LevelLocks<'a> {
-    fn new(mesh: &'a WeldedMesh, always_locked: &'a [u8], parts: &[Vec<u32>], refs: &[&[u32]]) -> Self {
+    fn new(mesh: &'a WeldedMesh, cell_border: &'a [bool], parts: &[Vec<u32>], refs: &[&[u32]]) -> Self {
         let owner = owners(mesh, parts, refs);
         let chords = Chords::new(parts, refs, &mesh.position_ids, |p| owner[p as usize].load(Relaxed) == SHARED);
-        LevelLocks { mesh, always_locked, owner, chords }
+        LevelLocks { mesh, cell_border, owner, chords }
     }
 
-    /// Whether position `p` is kept for the reasons `lock` selects (the cell border always).
-    fn kept(&self, lock: u8, p: u32) -> bool {
-        self.always_locked[p as usize] & (CELL_BORDER | lock) != 0
-    }
-
-    /// Whether welded vertex `v` is locked in a round holding `lock`: on a group border, or kept.
-    fn vertex(&self, lock: u8, v: u32) -> bool {
+    /// Whether welded vertex `v` is locked: on a group border or a cell border.
+    fn vertex(&self, v: u32) -> bool {
         let p = self.mesh.position_ids[v as usize];
-        self.owner[p as usize].load(Relaxed) == SHARED || self.kept(lock, p)
-    }
-
-    /// Whether welded vertex `v`, locked in a round holding `lock`, is locked only as a
-    /// non-manifold position (a round with `lock` 0 frees it).
-    fn only_non_manifold(&self, lock: u8, v: u32) -> bool {
-        lock & NON_MANIFOLD != 0 && self.vertex(lock, v) && !self.vertex(0, v)
+        self.owner[p as usize].load(Relaxed) == SHARED || self.cell_border[p as usize]
     }
 
     /// The first round's chord rule ([`Chords::free`]). A chord may end on a non-manifold
     /// position: the chords know every group holding it.
     fn free(&self, e: u64) -> bool {
-        self.chords.free(e, |p| self.kept(0, p))
+        self.chords.free(e, |p| self.cell_border[p as usize])
     }
 
     /// The later rounds' rule for group `g` ([`Chords::unshared`]).
     fn unshared(&self, g: u32, e: u64) -> bool {
-        self.chords.unshared(g, e, |p| self.kept(0, p))
+        self.chords.unshared(g, e, |p| self.cell_border[p as usize])
     }
 }
 
@@ -111,8 +89,6 @@ impl<'a> LevelLocks<'a> {
 struct PartInput {
     merged: Vec<u32>,
     masks: Vec<u8>,
-    /// The largest error of its members.
-    members_error: f32,
 }
 
 /// One parent cluster of a simplified group: triangles, open-border marks, owned level-0
@@ -225,9 +201,9 @@ fn first_samples(mesh: &WeldedMesh, clusters: &[Vec<u32>], non_manifold: &[u64])
 pub(crate) struct Builder<'a> {
     mesh: &'a WeldedMesh,
     settings: &'a BakeSettings,
-    /// Per position id: why it is locked at every level ([`CELL_BORDER`], [`NON_MANIFOLD`]
-    /// bits; see `always_locked`).
-    always_locked: Vec<u8>,
+    /// Per position id: on a shard or cell border, locked at every level of this builder
+    /// (see [`cell_borders`]).
+    cell_border: Vec<bool>,
     /// The whole level-0 surface, when the pending clusters started at level 0 and errors are
     /// measured (see `deviation::Original`).
     original: Option<Original>,
@@ -251,12 +227,12 @@ pub(crate) struct Builder<'a> {
 /// What a caller of [`Builder::with_prepared`] made beforehand, side by side with the level-0
 /// clusters: each is made by the builder where missing.
 #[derive(Default)]
-pub(crate) struct Prepared<'e> {
+pub(crate) struct Prepared {
     /// The whole level-0 surface (`Original::new`), where errors are measured.
     pub original: Option<Original>,
-    /// The mesh's sorted edges, for the positions always locked ([`Level0Edges::locked`], for
-    /// level-0 clusters of a whole mesh).
-    pub edges: Option<&'e Level0Edges>,
+    /// The clusters are the level-0 clusters of a whole mesh, which mark each of its odd
+    /// edges once: no position is on a cell border (see [`cell_borders`]).
+    pub whole_mesh: bool,
     /// The part sizes ([`part_sizes`]), where errors are measured.
     pub part_size: Option<Vec<f32>>,
     /// The first level's groups of all the clusters ([`groups`]).
@@ -279,17 +255,18 @@ impl<'a> Builder<'a> {
         level: u32,
         prepared: Prepared,
     ) -> Self {
-        let Prepared { original, edges, part_size, parts } = prepared;
+        let Prepared { original, whole_mesh, part_size, parts } = prepared;
         let from_level0 = clusters.iter().all(|c| c.own_group == NO_GROUP && !c.owned.is_empty());
         let measured = settings.error_bound == ErrorBound::Measured;
         // Independent passes over the whole mesh, two of them serial: side by side.
-        let (original, (always_locked, part_size)) = rayon::join(
+        let (original, (cell_border, part_size)) = rayon::join(
             || {
                 (measured && from_level0)
                     .then(|| original.unwrap_or_else(|| Original::new(mesh, &triangle_order(mesh))))
             },
             || {
-                let locked = || edges.map_or_else(|| always_locked(mesh, &clusters), |e| e.locked(mesh));
+                let locked =
+                    || if whole_mesh { vec![false; mesh.position_count] } else { cell_borders(mesh, &clusters) };
                 let sizes = || part_size.unwrap_or_else(|| if measured { part_sizes(mesh) } else { Vec::new() });
                 rayon::join(locked, sizes)
             },
@@ -299,7 +276,7 @@ impl<'a> Builder<'a> {
         Builder {
             mesh,
             settings,
-            always_locked,
+            cell_border,
             original,
             part_size,
             clusters,
@@ -350,14 +327,14 @@ impl<'a> Builder<'a> {
             }
             None => rayon::join(|| groups(mesh, pending(), self.settings), convert).0,
         };
-        let mut results = self.simplify_parts(&parts, &refs, NON_MANIFOLD);
+        let mut results = self.simplify_parts(&parts, &refs, false);
         if results.iter().all(Option::is_none) {
-            // Stuck everywhere: unlock the non-manifold edges, and take a small top whole
-            // (no group border is left to keep), so that every input reaches one root cluster.
+            // Stuck everywhere: lenient runs, and a small top taken whole (no group border is
+            // left to keep), so that every input reaches one root cluster.
             if self.pending.len() <= FORCED_GROUP_CLUSTERS {
                 parts = vec![(0..self.pending.len() as u32).collect()];
             }
-            results = self.simplify_parts(&parts, &refs, 0);
+            results = self.simplify_parts(&parts, &refs, true);
         }
         drop(refs);
         let progressed = self.adopt(&parts, results);
@@ -377,67 +354,56 @@ impl<'a> Builder<'a> {
     /// Simplifies each part (a group of pending clusters, whose triangles are `refs`) in
     /// parallel, with the positions it shares with other parts locked, and measures and splits
     /// each result kept ([`Builder::simplify_rounds`], [`Builder::finish_part`]); `None` where
-    /// stuck. `lock` selects which [`always_locked`] reasons hold (the cell border always does).
-    fn simplify_parts(&self, parts: &[Vec<u32>], refs: &[&[u32]], lock: u8) -> Vec<Option<Simplified>> {
-        let level = LevelLocks::new(self.mesh, &self.always_locked, parts, refs);
+    /// stuck. `lenient`: every run is lenient (the whole level was stuck; see
+    /// [`simplify_group`]).
+    fn simplify_parts(&self, parts: &[Vec<u32>], refs: &[&[u32]], lenient: bool) -> Vec<Option<Simplified>> {
+        let level = LevelLocks::new(self.mesh, &self.cell_border, parts, refs);
         let inputs: Vec<PartInput> = parts.par_iter().map(|part| self.part_input(part, refs)).collect();
-        let kept = self.simplify_rounds(&level, &inputs, lock);
+        let kept = self.simplify_rounds(&level, &inputs, lenient);
         // A retry of an outlier may add its result's own chords and unshared ones: none that
         // another group's kept result has or a retry of another group can add.
         let finish = |(g, kept): (usize, Kept)| {
-            let (mut s, lock) = kept?;
+            let (mut s, lenient) = kept?;
             // Nothing after the measure reads a result's chords.
             let own = std::mem::take(&mut s.chords);
             let chord = |e: u64| level.unshared(g as u32, e) || own.binary_search(&e).is_ok();
-            let vertex = |v: u32| level.vertex(lock, v);
+            let vertex = |v: u32| level.vertex(v);
             let locks = Locks { vertex: &vertex, chord: &chord };
-            Some(self.finish_part(&parts[g], &inputs[g], s, &locks, lock))
+            Some(self.finish_part(&parts[g], &inputs[g], s, &locks, lenient))
         };
         kept.into_par_iter().enumerate().map(finish).collect()
     }
 
     /// The simplification of each part that a level keeps (see [`Kept`]), in rounds that only
     /// simplify: two for the chords between locked positions (see [`crate::chords`]), and
-    /// where `lock` keeps the non-manifold edges and some parts simplify, a third for the
-    /// stuck parts with those edges unlocked. A result that a later round replaces is never
-    /// measured (on the two-cylinder engine, a quarter of the groups of the lower levels add a
-    /// chord a lower-numbered group added too).
-    fn simplify_rounds(&self, level: &LevelLocks, inputs: &[PartInput], lock: u8) -> Vec<Kept> {
-        let simplify = |g: usize, chord: &(dyn Fn(u64) -> bool + Sync), lock: u8| {
-            let vertex = |v: u32| level.vertex(lock, v);
+    /// where some parts simplify and others are stuck, a third for the stuck ones, lenient.
+    /// A result that a later round replaces is never measured (on the two-cylinder engine, a
+    /// quarter of the groups of the lower levels add a chord a lower-numbered group added too).
+    fn simplify_rounds(&self, level: &LevelLocks, inputs: &[PartInput], lenient: bool) -> Vec<Kept> {
+        let simplify = |g: usize, chord: &(dyn Fn(u64) -> bool + Sync), lenient: bool| {
+            let vertex = |v: u32| level.vertex(v);
             let locks = Locks { vertex: &vertex, chord };
             let input = &inputs[g];
-            simplify_group(self.mesh, &input.merged, &input.masks, &locks, self.settings, lock == 0).map(|s| (s, lock))
+            simplify_group(self.mesh, &input.merged, &input.masks, &locks, self.settings, lenient).map(|s| (s, lenient))
         };
         let free = |e: u64| level.free(e);
-        let mut kept: Vec<Kept> = (0..inputs.len()).into_par_iter().map(|g| simplify(g, &free, lock)).collect();
+        let mut kept: Vec<Kept> = (0..inputs.len()).into_par_iter().map(|g| simplify(g, &free, lenient)).collect();
         // Each group of a later round may add only chords no other group can have.
-        let again = |groups: Vec<usize>, lock: u8| -> Vec<(usize, Kept)> {
-            let run = |g: usize| (g, simplify(g, &|e: u64| level.unshared(g as u32, e), lock));
+        let again = |groups: Vec<usize>, lenient: bool| -> Vec<(usize, Kept)> {
+            let run = |g: usize| (g, simplify(g, &|e: u64| level.unshared(g as u32, e), lenient));
             groups.into_par_iter().map(run).collect()
         };
         let added: Vec<Option<&[u64]>> = kept.iter().map(|k| k.as_ref().map(|s| s.0.chords.as_slice())).collect();
-        for (g, result) in again(chords::conflicted(&added), lock) {
+        for (g, result) in again(chords::conflicted(&added), lenient) {
             kept[g] = result;
         }
-        if lock != 0 && kept.iter().any(Option::is_some) {
-            // Some groups simplified and some are stuck: the stuck ones try again with the
-            // non-manifold edges unlocked, rather than waiting for a level where all are stuck.
-            // So do those whose result jumped (see [`JUMP`]) while holding positions locked
-            // only as non-manifold; the smaller error is kept. Their unshared chords cannot
-            // meet another group's, of any round.
-            let jumped = |g: usize, s: &simplify::Simplified| {
-                let input = &inputs[g];
-                input.members_error > 0.0
-                    && s.error > JUMP * input.members_error
-                    && input.merged.iter().any(|&v| level.only_non_manifold(lock, v))
-            };
-            let retry = (0..inputs.len()).filter(|&g| kept[g].as_ref().is_none_or(|(s, _)| jumped(g, s))).collect();
-            for (g, result) in again(retry, 0) {
-                let better = |r: &(simplify::Simplified, u8)| kept[g].as_ref().is_none_or(|k| r.0.error < k.0.error);
-                if result.as_ref().is_some_and(better) {
-                    kept[g] = result;
-                }
+        if !lenient && kept.iter().any(Option::is_some) {
+            // Some groups simplified and some are stuck: the stuck ones try again, lenient,
+            // rather than waiting for a level where all are stuck. Their unshared chords
+            // cannot meet another group's, of any round.
+            let stuck = (0..inputs.len()).filter(|&g| kept[g].is_none()).collect();
+            for (g, result) in again(stuck, true) {
+                kept[g] = result;
             }
         }
         kept
@@ -446,11 +412,9 @@ impl<'a> Builder<'a> {
     /// A part's triangles (its clusters' triangles one after another) and their open-border
     /// marks: what its simplification runs on.
     fn part_input(&self, part: &[u32], refs: &[&[u32]]) -> PartInput {
-        let members = || part.iter().map(|&c| &self.clusters[self.pending[c as usize]]);
         PartInput {
             merged: part.iter().flat_map(|&c| refs[c as usize].iter().copied()).collect(),
-            masks: members().flat_map(|m| m.open.iter().copied()).collect(),
-            members_error: members().map(|m| m.own_error).fold(0.0, f32::max),
+            masks: part.iter().flat_map(|&c| self.clusters[self.pending[c as usize]].open.iter().copied()).collect(),
         }
     }
 
@@ -462,10 +426,10 @@ impl<'a> Builder<'a> {
         input: &PartInput,
         s: simplify::Simplified,
         locks: &Locks,
-        lock: u8,
+        lenient: bool,
     ) -> Simplified {
         let (mesh, settings) = (self.mesh, self.settings);
-        let (part_size, lenient) = (&self.part_size, lock == 0);
+        let part_size = &self.part_size;
         let (clusters, pending) = (&self.clusters, &self.pending);
         let members = || part.iter().map(|&c| &clusters[pending[c as usize]]);
         let members_error = members().map(|m| m.own_error).fold(0.0, f32::max);
@@ -650,9 +614,11 @@ fn level0_clusters(mesh: &WeldedMesh, settings: &BakeSettings, order: &[u32]) ->
 
 /// Per position id, whether it stays locked at every level of this builder: the ends of the
 /// edges the pending `clusters` use an odd number of times unmarked (a shard or cell border:
-/// the neighbouring cell holds the other side) and of edges used three or more times
-/// (non-manifold: several groups may share them, so they are kept as they are).
-fn always_locked(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<u8> {
+/// the neighbouring cell holds the other side). Non-manifold edges (used three or more times)
+/// are not locked: they simplify like any other edge, as meshoptimizer classifies their
+/// vertices (locked until a group was stuck, they held the coarse levels of meshes with fins
+/// or duplicate faces at 2-3 times the error of a discrete LOD chain: docs/BENCHMARKS.md).
+fn cell_borders(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<bool> {
     let id = |v: u32| mesh.position_ids[v as usize];
     let (mut edges, mut marked): (Vec<u64>, Vec<u64>) = clusters
         .par_iter()
@@ -668,12 +634,18 @@ fn always_locked(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<u8> {
         );
     edges.par_sort_unstable();
     marked.par_sort_unstable();
-    let runs = edges.chunk_by(|a, b| a == b).map(|run| (run[0], run.len(), open::count(&marked, run[0])));
-    locks_of(mesh.position_count, runs)
+    let mut border = vec![false; mesh.position_count];
+    for run in edges.chunk_by(|a, b| a == b) {
+        if (run.len() - open::count(&marked, run[0])) % 2 == 1 {
+            border[(run[0] >> 32) as usize] = true;
+            border[(run[0] & 0xffff_ffff) as usize] = true;
+        }
+    }
+    border
 }
 
 /// The sorted edge keys of a whole welded mesh (position ids), sorted once for what level 0
-/// needs of them: its odd (open) edges, and the positions its builder keeps locked.
+/// needs of them: its odd (open) edges and its non-manifold ones.
 pub(crate) struct Level0Edges {
     keys: Vec<u64>,
 }
@@ -699,26 +671,6 @@ impl Level0Edges {
     pub fn non_manifold(&self) -> Vec<u64> {
         self.keys.chunk_by(|a, b| a == b).filter(|r| r.len() >= 3).map(|r| r[0]).collect()
     }
-
-    /// [`always_locked`] of level-0 clusters that together hold every triangle of `mesh` and
-    /// mark its odd edges once each (`level0`): an edge's uses less its marks are then
-    /// always even, so no position is on a cell border, and the positions of edges used three
-    /// times or more are non-manifold. The same values, without sorting the edges again.
-    pub fn locked(&self, mesh: &WeldedMesh) -> Vec<u8> {
-        let runs = self.keys.chunk_by(|a, b| a == b).map(|r| (r[0], r.len(), r.len() % 2));
-        locks_of(mesh.position_count, runs)
-    }
-}
-
-/// Per position, the `always_locked` reasons of edge `runs`: (key, uses, marks).
-fn locks_of(positions: usize, runs: impl Iterator<Item = (u64, usize, usize)>) -> Vec<u8> {
-    let mut locked = vec![0u8; positions];
-    for (key, uses, marks) in runs {
-        let why = if (uses - marks) % 2 == 1 { CELL_BORDER } else { 0 } | if uses >= 3 { NON_MANIFOLD } else { 0 };
-        locked[(key >> 32) as usize] |= why;
-        locked[(key & 0xffff_ffff) as usize] |= why;
-    }
-    locked
 }
 
 /// The groups of `clusters` for one level: METIS on their graph (see [`crate::partition`]),
@@ -756,7 +708,7 @@ fn owners(mesh: &WeldedMesh, parts: &[Vec<u32>], refs: &[&[u32]]) -> Vec<AtomicU
 mod tests {
     use super::*;
     use crate::weld::weld;
-    use mres_geom::edges::{edge_ends, edge_key};
+    use mres_geom::edges::edge_key;
     use mres_import::SourceMesh;
 
     /// A strip of quads (open rim) with a fin: a third triangle on one inner edge.
@@ -775,55 +727,8 @@ mod tests {
         weld(&SourceMesh::positions_only(positions, indices), &BakeSettings::default()).unwrap()
     }
 
-    /// A 12 × 12 grid of quads where every seventh triangle is there twice: scattered
-    /// non-manifold edges, whose positions stay locked (as a scan's duplicate triangles).
-    fn grid_with_doubled_triangles() -> WeldedMesh {
-        let mut positions = Vec::new();
-        for y in 0..13 {
-            for x in 0..13 {
-                let z = ((x as f32 - 6.0).powi(2) + (y as f32 - 6.0).powi(2)) * 0.01;
-                positions.push([x as f32, y as f32, z]);
-            }
-        }
-        let mut indices = Vec::new();
-        for y in 0..12u32 {
-            for x in 0..12u32 {
-                let v = |dx: u32, dy: u32| (y + dy) * 13 + x + dx;
-                for t in [[v(0, 0), v(1, 0), v(1, 1)], [v(0, 0), v(1, 1), v(0, 1)]] {
-                    indices.extend(t);
-                    if (indices.len() / 3) % 7 == 3 {
-                        indices.extend(t);
-                    }
-                }
-            }
-        }
-        weld(&SourceMesh::positions_only(positions, indices), &BakeSettings::default()).unwrap()
-    }
-
-    #[test]
-    fn chords_may_end_on_non_manifold_positions() {
-        let mesh = grid_with_doubled_triangles();
-        let settings = BakeSettings::default();
-        let edges = Level0Edges::new(&mesh);
-        let clusters = level0(&mesh, &settings, (&edges, &edges.odd()), &triangle_order(&mesh));
-        let parts = vec![(0..clusters.len() as u32).collect::<Vec<u32>>()];
-        let builder = Builder::new(&mesh, &settings, clusters, 0);
-        let refs: Vec<&[u32]> = builder.clusters.iter().map(|c| c.indices.as_slice()).collect();
-        let level = LevelLocks::new(&mesh, &builder.always_locked, &parts, &refs);
-        let inputs = vec![builder.part_input(&parts[0], &refs)];
-        let results = builder.simplify_rounds(&level, &inputs, NON_MANIFOLD);
-        // Refusing those chords left the group stuck (None): closing an ear between two
-        // doubled triangles joins their locked corners.
-        let (simplified, _) = results[0].as_ref().expect("the group simplifies");
-        let kept = simplified.indices.len() / 3;
-        assert!(kept * 4 <= mesh.indices.len() / 3 * 3, "{kept} of {} triangles kept", mesh.indices.len() / 3);
-        let non_manifold = |p: u32| builder.always_locked[p as usize] & NON_MANIFOLD != 0;
-        assert!(simplified.chords.iter().any(|&e| edge_ends(e).iter().any(|&p| non_manifold(p))));
-    }
-
     /// Two separate grids of quads far apart, of 128 triangles each: 8 × 4 quads where every
-    /// triangle is there twice (every edge is non-manifold, every position locked), and 8 × 8
-    /// quads.
+    /// triangle is there twice (every edge is non-manifold), and 8 × 8 quads.
     fn grid_and_doubled_grid() -> WeldedMesh {
         let (mut positions, mut indices) = (Vec::new(), Vec::new());
         for (g, (x0, rows)) in [(0.0f32, 4u32), (100.0, 8)].into_iter().enumerate() {
@@ -851,7 +756,9 @@ mod tests {
     }
 
     #[test]
-    fn a_group_stuck_on_non_manifold_edges_retries_with_them_unlocked_when_others_simplify() {
+    fn groups_with_non_manifold_edges_simplify_in_their_first_run() {
+        // The doubled grid's every edge is non-manifold: locked, it was stuck (None) in the
+        // first run and simplified only in the stuck groups' lenient retry.
         let mesh = grid_and_doubled_grid();
         let settings = BakeSettings::default();
         let edges = Level0Edges::new(&mesh);
@@ -863,28 +770,26 @@ mod tests {
         assert_eq!(parts, vec![vec![0], vec![1]], "one level-0 cluster per grid");
         let builder = Builder::new(&mesh, &settings, clusters, 0);
         let refs: Vec<&[u32]> = builder.clusters.iter().map(|c| c.indices.as_slice()).collect();
-        let results = builder.simplify_parts(&parts, &refs, NON_MANIFOLD);
-        let kept = |r: &Option<Simplified>| r.as_ref().map(|s| s.children.iter().map(|c| c.indices.len() / 3).sum());
-        // Both grids halve; without the retry the doubled one stays stuck (None).
-        assert_eq!(results.iter().map(kept).collect::<Vec<Option<usize>>>(), vec![Some(60), Some(63)]);
+        let level = LevelLocks::new(&mesh, &builder.cell_border, &parts, &refs);
+        let inputs: Vec<PartInput> = parts.iter().map(|part| builder.part_input(part, &refs)).collect();
+        for (g, kept) in builder.simplify_rounds(&level, &inputs, false).iter().enumerate() {
+            let (simplified, lenient) = kept.as_ref().unwrap_or_else(|| panic!("group {g} is stuck"));
+            assert!(!lenient, "group {g} simplified only in the stuck groups' retry");
+            let kept = simplified.indices.len() / 3;
+            assert!(kept * 4 <= 128 * 3, "group {g}: {kept} of 128 triangles kept");
+        }
     }
 
     #[test]
-    fn level0_locks_from_the_sorted_edges_match_the_clusters() {
+    fn a_whole_mesh_level_0_has_no_cell_border_and_an_unmarked_open_edge_makes_one() {
         let mesh = finned_strip();
         let edges = Level0Edges::new(&mesh);
         let clusters = level0(&mesh, &BakeSettings::default(), (&edges, &edges.odd()), &triangle_order(&mesh));
-        let locked = edges.locked(&mesh);
-        assert_eq!(locked, always_locked(&mesh, &clusters));
-        // The fin's edge is non-manifold at both ends; nothing is a cell border.
-        let id = |v: usize| mesh.position_ids[mesh.positions.iter().position(|p| *p == [2.0, v as f32, 0.0]).unwrap()];
-        assert!(locked[id(0) as usize] & NON_MANIFOLD != 0 && locked[id(1) as usize] & NON_MANIFOLD != 0);
-        assert_eq!(locked.iter().filter(|&&l| l & NON_MANIFOLD != 0).count(), 2);
-        assert!(locked.iter().all(|&l| l & CELL_BORDER == 0));
-        // A cluster whose open edge is left unmarked puts it on a cell border.
+        // The fin's non-manifold edge locks nothing; every odd edge is marked once.
+        assert!(cell_borders(&mesh, &clusters).iter().all(|&b| !b));
         let mut unmarked = clusters.clone();
         unmarked[0].open.iter_mut().for_each(|m| *m = 0);
-        assert!(always_locked(&mesh, &unmarked).iter().any(|&l| l & CELL_BORDER != 0));
+        assert!(cell_borders(&mesh, &unmarked).iter().any(|&b| b));
     }
 
     #[test]

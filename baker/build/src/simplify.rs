@@ -163,10 +163,10 @@ pub fn simplify_group(
         // and it reaches its target by folding one panel onto the other. The permissive run
         // collapses there; the smaller error is kept. (A floor and a wall of 19,200
         // triangles: 160 triangles at 5.7 against 150 at 9e-5 at the level where it folded.)
-        // A lenient run with attributes tries it too: it runs because the group was stuck or
-        // jumped with its non-manifold positions locked, and those whose sheets have their own
-        // normals or UVs stay put in a regular run even unlocked (walls with normals crossing
-        // inside a floor: 0.59, 3.9 % of the diagonal, against a permissive result below 1e-3).
+        // A lenient run with attributes tries it too: it runs because the group was stuck,
+        // and non-manifold positions whose sheets have their own normals or UVs stay put in a
+        // regular run (walls with normals crossing inside a floor: 0.59, 3.9 % of the
+        // diagonal, against a permissive result below 1e-3).
         let folded = regular.error > FOLD * meshopt::simplify_scale(&adapter);
         if folded || (lenient && !weights.is_empty()) {
             if let Some(permissive) = attempt(Method::Permissive).filter(|p| p.error < regular.error) {

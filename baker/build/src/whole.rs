@@ -33,8 +33,8 @@ pub fn build_whole<O: DagOutput>(
     // The whole level-0 surface that errors are measured against, made beside the clusters.
     let measured = settings.error_bound == ErrorBound::Measured;
     let (welded, order) = numbered_in_triangle_order(welded);
-    // The mesh's edges, sorted once: its open edges for the clusters, its locked positions,
-    // its open parts (a ladder's copies add no triangle, so they leave the edges as they are).
+    // The mesh's edges, sorted once: its open and non-manifold edges for the clusters, its
+    // open parts (a ladder's copies add no triangle, so they leave the edges as they are).
     let edges = Level0Edges::new(&welded);
     let welded = area::prepare(welded, settings, Some(edges.sorted()));
     // The part sizes and the first level's groups (METIS) are serial passes: beside the
@@ -48,9 +48,9 @@ pub fn build_whole<O: DagOutput>(
         },
     );
     drop(order);
-    let prepared = Prepared { original, edges: Some(&edges), part_size, parts: Some(parts) };
-    let mut builder = Builder::with_prepared(&welded, settings, clusters, 0, prepared);
     drop(edges);
+    let prepared = Prepared { original, whole_mesh: true, part_size, parts: Some(parts) };
+    let mut builder = Builder::with_prepared(&welded, settings, clusters, 0, prepared);
     clock.lap(&mut stats, "level 0");
     progress(&format!("level 0: {} clusters", builder.clusters.len()));
     let mut converted = Converted::new();
