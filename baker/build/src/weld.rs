@@ -33,7 +33,8 @@ pub struct WeldedMesh {
     pub multi_material: bool,
     /// Triangle list into the vertex arrays.
     pub indices: Vec<u32>,
-    /// Triangles dropped because they became degenerate on the grid (plus the importer's).
+    /// Triangles dropped because they became degenerate on the grid (plus the importer's), or
+    /// repeated an earlier triangle exactly (see `drop_duplicates`).
     pub degenerate_dropped: u64,
     /// Triangles of the source.
     pub source_triangles: u64,
@@ -130,7 +131,7 @@ pub fn weld_on(mesh: &SourceMesh, settings: &BakeSettings, grid: Grid, uv: UvQua
     };
     let collapsed = add_triangles(&mut out, mesh.triangle_count(), vertex_of);
     warn_collapsed(&out, &collapsed, vertex_of, grid.step, settings.position_bits);
-    out.degenerate_dropped += mesh.degenerate_dropped;
+    out.degenerate_dropped += drop_duplicates(&mut out.indices) + mesh.degenerate_dropped;
     out.source_triangles = mesh.triangle_count() as u64 + mesh.degenerate_dropped;
     out
 }
@@ -311,6 +312,42 @@ fn add_triangles(out: &mut WeldedMesh, triangles: usize, vertex_of: impl Fn(usiz
     let dropped: Vec<u32> = (0..triangles as u32).filter(|&t| welded[t as usize].is_none()).collect();
     out.degenerate_dropped += dropped.len() as u64;
     dropped
+}
+
+/// Drops each triangle that repeats an earlier one exactly: the same welded vertices in the
+/// same winding (any rotation), so the same positions, attributes and material. Such a copy
+/// adds nothing to the surface but makes its three edges non-manifold (used three times or
+/// more), and the simplifier's collapses around them pinch edges that the group's crack check
+/// then refuses: on the generated defects (1,335 copies in 120,217 triangles) the first level
+/// kept 66 % instead of half, and the bake took 1.4 times as long. Two-sided sheets (the
+/// opposite winding) and copies with other attributes are kept. Returns how many were dropped;
+/// the first of equal triangles stays. Source triangles only: the clusters a sharded build
+/// carries on are welded as they are (their edge counts are what the cut invariant checks).
+fn drop_duplicates(indices: &mut Vec<u32>) -> u64 {
+    let rotated = |t: &[u32]| {
+        let least = if t[0] <= t[1] && t[0] <= t[2] {
+            0
+        } else if t[1] <= t[2] {
+            1
+        } else {
+            2
+        };
+        [t[least], t[(least + 1) % 3], t[(least + 2) % 3]]
+    };
+    let mut keys: Vec<([u32; 3], u32)> =
+        indices.par_chunks_exact(3).enumerate().map(|(i, t)| (rotated(t), i as u32)).collect();
+    keys.par_sort_unstable();
+    let repeats: Vec<u32> = keys.chunk_by(|a, b| a.0 == b.0).flat_map(|run| run[1..].iter().map(|k| k.1)).collect();
+    if repeats.is_empty() {
+        return 0;
+    }
+    let mut repeat = vec![false; indices.len() / 3];
+    for &t in &repeats {
+        repeat[t as usize] = true;
+    }
+    let kept = indices.chunks_exact(3).zip(&repeat).filter(|(_, &r)| !r).flat_map(|(t, _)| t.iter().copied());
+    *indices = kept.collect();
+    repeats.len() as u64
 }
 
 impl WeldedMesh {
@@ -508,8 +545,38 @@ mod tests {
         };
         let w = weld(&mesh, &BakeSettings::default()).unwrap();
         assert_eq!(w.grid_positions.len(), 3);
-        assert_eq!(w.indices.len(), 6);
-        assert_eq!(w.degenerate_dropped, 1);
+        // The second triangle welds into a rotation of the first: a copy, dropped.
+        assert_eq!(w.indices.len(), 3);
+        assert_eq!(w.degenerate_dropped, 2);
+    }
+
+    #[test]
+    fn exact_copies_drop_and_two_sided_or_differently_shaded_ones_stay() {
+        let quad = |normals: Vec<[f32; 3]>, indices: Vec<u32>| {
+            let positions = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]];
+            let materials = vec![0; indices.len() / 3];
+            let mesh = SourceMesh { positions, normals: Some(normals), indices, materials, ..Default::default() };
+            weld(&mesh, &BakeSettings::default()).unwrap()
+        };
+        let up = vec![[0.0, 0.0, 1.0]; 4];
+        // Two triangles, each again rotated, then the first once more: three copies dropped.
+        let w = quad(up.clone(), vec![0, 1, 2, 1, 3, 2, 1, 2, 0, 3, 2, 1, 0, 1, 2]);
+        assert_eq!((w.indices.len(), w.degenerate_dropped), (6, 3));
+        // The opposite winding (a two-sided sheet) stays.
+        let w = quad(up, vec![0, 1, 2, 0, 2, 1]);
+        assert_eq!((w.indices.len(), w.degenerate_dropped), (6, 0));
+        // The same positions with other normals (other welded vertices) stay.
+        let mut normals = vec![[0.0, 0.0, 1.0]; 4];
+        normals[3] = [0.0, 0.0, -1.0];
+        let mesh = SourceMesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
+            normals: Some(normals),
+            indices: vec![0, 1, 2, 0, 3, 2],
+            materials: vec![0, 0],
+            ..Default::default()
+        };
+        let w = weld(&mesh, &BakeSettings::default()).unwrap();
+        assert_eq!((w.indices.len(), w.degenerate_dropped), (6, 0));
     }
 
     #[test]

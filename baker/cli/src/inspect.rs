@@ -332,7 +332,7 @@ impl Summary {
         );
         let _ = writeln!(
             s,
-            "  triangles   {} input, {} at level 0, {} degenerate dropped",
+            "  triangles   {} input, {} at level 0, {} degenerate or duplicate dropped",
             count(self.input_triangles),
             count(self.level0_triangles),
             count(self.degenerate_dropped)

@@ -387,7 +387,7 @@ fn asset_line(r: &AssetReport, n: usize, total: usize) -> String {
             r.input_triangles,
             match r.degenerate_dropped {
                 0 => String::new(),
-                d => format!(" ({d} degenerate dropped)"),
+                d => format!(" ({d} degenerate or duplicate dropped)"),
             },
             r.levels,
             match r.shards {
@@ -417,7 +417,7 @@ fn print_summary(cli: &Cli, found: &Found, reports: &[AssetReport], seconds: f64
     let repaired = reports.iter().filter(|r| r.cache_repaired).count();
     let skipped = found.skipped.len();
     eprintln!(
-        "{} assets: {} baked, {} cached, {} failed; {tris} input triangles ({dropped} degenerate dropped), \
+        "{} assets: {} baked, {} cached, {} failed; {tris} input triangles ({dropped} degenerate or duplicate dropped), \
          {bytes} bytes out ({:.2} B/input triangle); {skipped} files skipped{}; {:.2}s{}",
         reports.len(),
         count("baked"),

@@ -405,7 +405,7 @@ fn validate_cmd(a: ValidateArgs) -> Result<ExitCode> {
 
 fn print_validate(file: &Path, report: &mres_check::validate::Report, level0: u64) {
     println!(
-        "{}: {} bytes, {} input triangles ({} at level 0, {} degenerate dropped), {:.2} bytes/input triangle, {} pages",
+        "{}: {} bytes, {} input triangles ({} at level 0, {} degenerate or duplicate dropped), {:.2} bytes/input triangle, {} pages",
         file.display(),
         report.bytes,
         report.source_triangles,
@@ -694,7 +694,7 @@ fn bench_cmd(a: BenchArgs) -> Result<ExitCode> {
 fn print_bench(a: &BenchArgs, r: &Report) {
     let best = &r.runs;
     println!(
-        "{} ({} input triangles, {} degenerate dropped by the importer), min over {} run(s)",
+        "{} ({} input triangles, {} degenerate or duplicate dropped on import), min over {} run(s)",
         a.input.display(),
         best[0].input_triangles,
         best[1].degenerate_dropped,

@@ -236,7 +236,7 @@ fn inspect_summarises_levels_and_cuts_without_float_noise() {
     let r = run(MRES, &["inspect", file.to_str().unwrap()]);
     let out = String::from_utf8_lossy(&r.stdout).into_owned();
     for needle in [
-        "4,800 input, 4,800 at level 0, 0 degenerate dropped",
+        "4,800 input, 4,800 at level 0, 0 degenerate or duplicate dropped",
         "normals (10-bit octahedral), no UVs, no materials",
         "per level",
         "E / diagonal",
@@ -285,7 +285,7 @@ fn every_command_counts_input_triangles_alike_and_reports_degenerates() {
     };
     for (msg, r) in [bake(), bake()] {
         // Baked, then from the cache: the same figures.
-        assert!(msg.contains("202 input triangles (2 degenerate dropped)"), "{msg}");
+        assert!(msg.contains("202 input triangles (2 degenerate or duplicate dropped)"), "{msg}");
         assert_eq!(
             (r["input_triangles"].as_u64(), r["level0_triangles"].as_u64(), r["degenerate_dropped"].as_u64()),
             (Some(202), Some(200), Some(2)),
@@ -298,7 +298,11 @@ fn every_command_counts_input_triangles_alike_and_reports_degenerates() {
     let v: serde_json::Value = serde_json::from_slice(&v.stdout).unwrap();
     assert_eq!((v["input_triangles"].as_u64(), v["level0_triangles"].as_u64()), (Some(202), Some(200)));
     let t = run(MRES, &["validate", file.to_str().unwrap(), "--random-cuts", "10"]);
-    assert!(text(&t).contains("202 input triangles (200 at level 0, 2 degenerate dropped)"), "{}", text(&t));
+    assert!(
+        text(&t).contains("202 input triangles (200 at level 0, 2 degenerate or duplicate dropped)"),
+        "{}",
+        text(&t)
+    );
     let i = run(MRES, &["inspect", file.to_str().unwrap(), "--json"]);
     let i: serde_json::Value = serde_json::from_slice(&i.stdout).unwrap();
     assert_eq!(
