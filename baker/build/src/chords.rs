@@ -3,8 +3,8 @@
 //! Collapsing a vertex next to a locked border often joins two border positions that were not
 //! joined before (an "ear" closes). Inside the group such a chord is an ordinary edge, used
 //! twice; it becomes a pinch (an edge used four times, docs/INVARIANTS.md §1 (c)) only where
-//! another group uses the same edge as well, and a pinch is non-manifold, so it would stay
-//! locked at the next levels. Forbidding every chord made the first simplification of almost
+//! another group uses the same edge as well: a non-manifold edge the input did not have, which
+//! the validator counts and reports. Forbidding every chord made the first simplification of almost
 //! every group fail its border check and run again with more locks and a higher target
 //! (nefertiti: 275 runs of the simplifier for 134 groups, each result 60% of its input
 //! instead of the 50% aimed at). So a level is simplified in two rounds: first every group may

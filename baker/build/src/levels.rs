@@ -73,8 +73,8 @@ impl<'a> LevelLocks<'a> {
         self.owner[p as usize].load(Relaxed) == SHARED || self.cell_border[p as usize]
     }
 
-    /// The first round's chord rule ([`Chords::free`]). A chord may end on a non-manifold
-    /// position: the chords know every group holding it.
+    /// The first round's chord rule ([`Chords::free`]): no end on a cell border (another
+    /// cell's groups, unseen here, may hold it).
     fn free(&self, e: u64) -> bool {
         self.chords.free(e, |p| self.cell_border[p as usize])
     }
