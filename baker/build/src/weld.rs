@@ -4,6 +4,7 @@
 
 use crate::settings::BakeSettings;
 use mres_format::{Grid, UvQuant};
+use mres_geom::edges::rotated_to_least;
 use mres_geom::parts::UnionFind;
 use mres_import::SourceMesh;
 use rayon::prelude::*;
@@ -324,30 +325,25 @@ fn add_triangles(out: &mut WeldedMesh, triangles: usize, vertex_of: impl Fn(usiz
 /// the first of equal triangles stays. Source triangles only: the clusters a sharded build
 /// carries on are welded as they are (their edge counts are what the cut invariant checks).
 fn drop_duplicates(indices: &mut Vec<u32>) -> u64 {
-    let rotated = |t: &[u32]| {
-        let least = if t[0] <= t[1] && t[0] <= t[2] {
-            0
-        } else if t[1] <= t[2] {
-            1
-        } else {
-            2
-        };
-        [t[least], t[(least + 1) % 3], t[(least + 2) % 3]]
-    };
-    let mut keys: Vec<([u32; 3], u32)> =
-        indices.par_chunks_exact(3).enumerate().map(|(i, t)| (rotated(t), i as u32)).collect();
+    let mut keys: Vec<([u32; 3], u32)> = indices
+        .par_chunks_exact(3)
+        .enumerate()
+        .map(|(i, t)| (rotated_to_least([t[0], t[1], t[2]]), i as u32))
+        .collect();
     keys.par_sort_unstable();
-    let repeats: Vec<u32> = keys.chunk_by(|a, b| a.0 == b.0).flat_map(|run| run[1..].iter().map(|k| k.1)).collect();
-    if repeats.is_empty() {
-        return 0;
-    }
+    // Sorted by (key, index): each run's first is the earliest of its copies.
     let mut repeat = vec![false; indices.len() / 3];
-    for &t in &repeats {
-        repeat[t as usize] = true;
+    let mut dropped = 0;
+    for run in keys.chunk_by(|a, b| a.0 == b.0) {
+        for &(_, t) in &run[1..] {
+            (repeat[t as usize], dropped) = (true, dropped + 1);
+        }
     }
-    let kept = indices.chunks_exact(3).zip(&repeat).filter(|(_, &r)| !r).flat_map(|(t, _)| t.iter().copied());
-    *indices = kept.collect();
-    repeats.len() as u64
+    if dropped > 0 {
+        let kept = indices.chunks_exact(3).zip(&repeat).filter(|(_, &r)| !r).flat_map(|(t, _)| t.iter().copied());
+        *indices = kept.collect();
+    }
+    dropped
 }
 
 impl WeldedMesh {

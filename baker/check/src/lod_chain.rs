@@ -9,11 +9,10 @@
 //! same screen-space error rule as the DAG (coarsest level whose projected error is ≤ τ at the
 //! instance's nearest point).
 
-use std::collections::HashMap;
-
 use crate::distance::{two_sided_with, Surface};
 use anyhow::{Context as _, Result};
-use mres_format::{MresFile, NO_GROUP};
+use mres_format::{MresFile, FLAG_NORMALS, FLAG_UVS, NO_GROUP};
+use mres_geom::edges::rotated_to_least;
 
 /// One level of the chain: a range of the shared index buffer.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -140,12 +139,11 @@ impl Level0 {
     /// level measure) followed the page layout, and two bakes with the same level 0 gave chains
     /// 20–35 % apart in the view cost (docs/BENCHMARKS.md "View cost").
     fn of(file: &MresFile) -> Result<Level0> {
-        let mut weld: HashMap<([i32; 3], [u32; 5]), u32> = HashMap::new();
-        let (mut keys, mut base) = (Vec::new(), Vec::new());
         let uv = file.header.uv;
         let scaled =
             |t: [f32; 2]| [0, 1].map(|k| if uv.extent[k] > 0.0 { (t[k] - uv.min[k]) / uv.extent[k] } else { 0.0 });
-        let mut width = 0;
+        // A vertex's key: grid position and attribute bits (normal, then scaled UV).
+        let mut corners: Vec<Key> = Vec::new();
         for (p, info) in file.pages.iter().enumerate() {
             let raw = file.page(p as u32).with_context(|| format!("page {p}"))?;
             for c in info.first_cluster..info.first_cluster + info.cluster_count {
@@ -153,44 +151,33 @@ impl Level0 {
                     continue;
                 }
                 let d = file.decode_cluster(&raw, c).with_context(|| format!("page {p}"))?;
-                let ids: Vec<u32> = (0..d.positions.len())
-                    .map(|v| {
-                        let normal = d.normals.get(v).into_iter().flatten().copied();
-                        let uv = d.uvs.get(v).map(|&t| scaled(t)).into_iter().flatten();
-                        let mut row = [0.0f32; 5];
-                        width = 0;
-                        for (slot, x) in row.iter_mut().zip(normal.chain(uv)) {
-                            (*slot, width) = (x, width + 1);
-                        }
-                        let key = (d.positions[v], row.map(f32::to_bits));
-                        *weld.entry(key).or_insert_with(|| {
-                            keys.push(key);
-                            keys.len() as u32 - 1
-                        })
-                    })
-                    .collect();
-                base.extend(d.indices.iter().map(|&i| ids[i as usize]));
+                let key = |v: usize| {
+                    let normal = d.normals.get(v).into_iter().flatten().copied();
+                    let uv = d.uvs.get(v).map(|&t| scaled(t)).into_iter().flatten();
+                    let mut row = [0u32; 5];
+                    for (slot, x) in row.iter_mut().zip(normal.chain(uv)) {
+                        *slot = x.to_bits();
+                    }
+                    (d.positions[v], row)
+                };
+                corners.extend(d.indices.iter().map(|&i| key(i as usize)));
             }
         }
-        // Canonical vertex numbers: rank of each vertex's key.
-        let mut order: Vec<u32> = (0..keys.len() as u32).collect();
-        order.sort_unstable_by_key(|&v| keys[v as usize]);
-        let mut rank = vec![0u32; keys.len()];
-        for (r, &v) in order.iter().enumerate() {
-            rank[v as usize] = r as u32;
-        }
-        let positions = order.iter().map(|&v| file.header.grid.decode(keys[v as usize].0)).collect();
-        let attributes =
-            order.iter().flat_map(|&v| keys[v as usize].1[..width].iter().map(|&b| f32::from_bits(b))).collect();
-        let mut triangles: Vec<[u32; 3]> = base
-            .chunks_exact(3)
-            .map(|t| {
-                let t = [rank[t[0] as usize], rank[t[1] as usize], rank[t[2] as usize]];
-                let least = (0..3).min_by_key(|&k| t[k]).unwrap_or(0);
-                [t[least], t[(least + 1) % 3], t[(least + 2) % 3]]
-            })
-            .collect();
+        // Canonical vertex numbers: the rank of the vertex's key.
+        let mut keys = corners.clone();
+        keys.sort_unstable();
+        keys.dedup();
+        let id = |k: &Key| keys.binary_search(k).unwrap_or(0) as u32;
+        let mut triangles: Vec<[u32; 3]> =
+            corners.chunks_exact(3).map(|t| rotated_to_least([id(&t[0]), id(&t[1]), id(&t[2])])).collect();
         triangles.sort_unstable();
+        let has = |flag: u32| file.header.flags & flag != 0;
+        let width = 3 * usize::from(has(FLAG_NORMALS)) + 2 * usize::from(has(FLAG_UVS));
+        let positions = keys.iter().map(|k| file.header.grid.decode(k.0)).collect();
+        let attributes = keys.iter().flat_map(|k| k.1[..width].iter().map(|&b| f32::from_bits(b))).collect();
         Ok(Level0 { positions, attributes, base: triangles.concat() })
     }
 }
+
+/// A level-0 vertex: its grid position and its attributes' bits (see [`Level0::of`]).
+type Key = ([i32; 3], [u32; 5]);

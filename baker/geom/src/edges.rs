@@ -12,6 +12,19 @@ pub fn edge_ends(e: u64) -> [u32; 2] {
     [(e >> 32) as u32, e as u32]
 }
 
+/// Triangle `t` rotated to start at its least vertex, winding kept: equal for the rotations of
+/// one triangle, different for the opposite winding (a key for exact copies of a triangle).
+pub fn rotated_to_least(t: [u32; 3]) -> [u32; 3] {
+    let least = if t[0] <= t[1] && t[0] <= t[2] {
+        0
+    } else if t[1] <= t[2] {
+        1
+    } else {
+        2
+    };
+    [t[least], t[(least + 1) % 3], t[(least + 2) % 3]]
+}
+
 /// The edge keys of a triangle list (three per triangle, edge k from corner k), in triangle
 /// order; `position` maps an index to its position id.
 pub fn edge_keys<T: Copy>(triangles: &[T], position: impl Fn(T) -> u32) -> Vec<u64> {
