@@ -14,7 +14,6 @@
 //! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
 //! with their worst spots locked ([`measure_simplified`]).
 
-use crate::patches::{accept_patches, Box3};
 use crate::samples::{sample_point, set_bits, Owned, Samples, CENTROID, NOT_FOUND, VANISHED};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Locks, Simplified};
@@ -313,6 +312,9 @@ fn around((lo, hi): Box3) -> ([f32; 3], f32) {
     (centre, reach)
 }
 
+/// An axis-aligned box: lower and upper corner.
+type Box3 = ([f32; 3], [f32; 3]);
+
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
@@ -449,12 +451,6 @@ fn measure(
     // Input → output, in runs measured in parallel (large groups are few, at the top levels).
     let ids: Vec<u32> = output.iter().map(|&v| id(v)).collect();
     let output_surface = Surface::new(output_tris, &ids);
-    if sides.owned.is_some() {
-        let output = &output_surface;
-        let bound = |e: f32| limits.enough2(worst, e as f64).sqrt();
-        let input = (&input_tris[..], &reach_of[..]);
-        accept_patches(input, (&mut input_duty, &mut found), output, triangle_errors, bound);
-    }
     let side = InputSide {
         mesh,
         center,
@@ -637,6 +633,7 @@ impl InputSide<'_> {
         let id = |v: u32| self.mesh.position_ids[v as usize];
         let mut far = Far::default();
         let mut hint = usize::MAX;
+        let mut last = Last { point: [0.0; 3], distance: f32::INFINITY };
         for pass in [0b000_0111u8, 0b111_1000] {
             for (j, slots) in found.chunks_exact_mut(7).enumerate() {
                 let i = first + j;
@@ -652,8 +649,18 @@ impl InputSide<'_> {
                 }
                 for b in set_bits(self.duty[i] & pass) {
                     let enough = limits.enough2(worst, e as f64);
-                    let (d2, nearest) = output.nearest_squared(sample_point(tri, b), enough, hint, STEPS);
-                    hint = nearest;
+                    let p = sample_point(tri, b);
+                    if last.settles(p, enough) {
+                        // Within the bound of the last query's triangle (see `Last`).
+                        if self.reach[i] > 0.0 {
+                            slots.fill(hint as u32);
+                        } else {
+                            slots[b] = hint as u32;
+                        }
+                        continue;
+                    }
+                    let (d2, nearest) = output.nearest_squared(p, enough, hint, STEPS);
+                    (hint, last) = (nearest, Last { point: p, distance: d2.sqrt() });
                     if self.reach[i] > 0.0 {
                         // A ball, measured at its centre.
                         slots.fill(nearest as u32);
@@ -676,6 +683,29 @@ impl InputSide<'_> {
             }
         }
         (worst, far)
+    }
+}
+
+/// The last query of a run of input samples: its point and its distance to the triangle it
+/// stopped at. Distance to a triangle is 1-Lipschitz, so a sample `p` within `enough` minus
+/// that distance of the point lies within `enough` of that triangle, and no query needs to
+/// say so: the samples follow one another in space (entries in Morton order, a triangle's
+/// samples side by side), and from the middle levels up the bound spans several level-0
+/// triangles. Such a sample cannot raise the error, and the triangle is a valid `found` for
+/// it (within the group's error).
+#[derive(Clone, Copy)]
+struct Last {
+    point: [f32; 3],
+    distance: f32,
+}
+
+impl Last {
+    /// Whether `p` lies within `enough2` (squared) of the last query's triangle: its distance
+    /// plus the way from its point, padded for the f32 rounding of both.
+    fn settles(&self, p: [f32; 3], enough2: f32) -> bool {
+        let way2: f32 = (0..3).map(|k| (p[k] - self.point[k]) * (p[k] - self.point[k])).sum();
+        let reach = (self.distance + way2.sqrt()) * (1.0 + 1e-5);
+        reach * reach <= enough2
     }
 }
 
@@ -934,6 +964,63 @@ mod tests {
             assert_eq!(total(floor), exact);
         }
         assert_eq!(total(2.0 * exact), 2.0 * exact);
+    }
+
+    #[test]
+    fn a_sample_settled_by_the_last_query_lies_within_the_bound_of_its_triangle() {
+        // Points near a tilted triangle, pairs of them as (last query, next sample): whenever
+        // the next is settled, its true distance to the triangle is within the bound.
+        let tri: Triangle<f32> = [[0.0, 0.0, 0.0], [1.0, 0.2, 0.1], [0.3, 1.0, -0.2]];
+        let mut state = 11u64;
+        let mut unit = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let distance = |p: [f32; 3]| mres_geom::bvh::point_triangle_distance2(p, &tri).sqrt();
+        let (mut settled, mut refused) = (0, 0);
+        for _ in 0..20_000 {
+            let q = [0, 1, 2].map(|_| 1.6 * unit() - 0.3);
+            let p = [0, 1, 2].map(|k| q[k] + 0.2 * unit() - 0.1);
+            let bound = 0.5 * unit();
+            let last = Last { point: q, distance: distance(q) };
+            if last.settles(p, bound * bound) {
+                settled += 1;
+                assert!(distance(p) <= bound, "{p:?} from {q:?}: {} beyond {bound}", distance(p));
+            } else if distance(p) <= bound {
+                refused += 1;
+            }
+        }
+        // Not vacuous: many settle, and some within the bound are left to a query.
+        assert!(settled > 1_000 && refused > 0, "{settled} settled, {refused} refused");
+    }
+
+    #[test]
+    fn every_sample_found_at_a_triangle_lies_within_the_error_of_it() {
+        // The hand-down gives each measured sample to the cluster of the triangle it was found
+        // at, which must be within the group's error of it, also where the last query settled it.
+        let (w, output) = bumpy(16);
+        let sizes = part_sizes(&w);
+        let original = Original::new(&w, &crate::partition::triangle_order(&w));
+        let input = w.indices.clone();
+        let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
+        let errors = vec![0.0; owned.len()];
+        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), small: 0.0, members: &input };
+        let at = |v: u32| w.positions[v as usize];
+        let exact = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original)).0;
+        for floor in [0.0, 0.5 * exact, 3.0 * exact] {
+            let (worst, _, found) = measure(&w, &sides, &output, &sizes, floor, None, Some(&original));
+            let mut checked = 0;
+            for (i, t) in input.chunks_exact(3).enumerate() {
+                let tri = [at(t[0]), at(t[1]), at(t[2])];
+                for (b, &f) in found[7 * i..7 * i + 7].iter().enumerate().filter(|(_, &f)| f < VANISHED) {
+                    let o = [0, 1, 2].map(|k| at(output[3 * f as usize + k]));
+                    let d2 = mres_geom::bvh::point_triangle_distance2(sample_point(&tri, b), &o);
+                    assert!((d2 as f64).sqrt() <= worst * 1.0001, "entry {i} sample {b}: {} > {worst}", d2.sqrt());
+                    checked += 1;
+                }
+            }
+            assert!(checked > input.len(), "{checked} samples found at floor {floor}");
+        }
     }
 
     #[test]

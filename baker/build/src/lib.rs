@@ -14,7 +14,6 @@ pub mod error;
 pub mod levels;
 pub mod open;
 pub mod partition;
-pub mod patches;
 pub mod progress;
 pub mod samples;
 pub mod settings;

@@ -26,9 +26,9 @@ pub const BALL_FRACTION: f64 = 0.2;
 
 /// A cluster's samples are gathered into balls only where they are at least this many times
 /// its triangles: at the upper levels, where every level would otherwise measure, sort and hand
-/// down the whole input again. Below, where a ball would hold a few triangles, the patches of
-/// the measure (one query per settled run) do the same work for less, and gathering would cost
-/// more than it saves. Measured: see docs/BENCHMARKS.md (bake time).
+/// down the whole input again. Below, where a ball would hold a few triangles, gathering would
+/// cost more than it saves (the measure settles most of such samples by the previous query,
+/// one distance each: `deviation::Last`). Measured: see docs/BENCHMARKS.md (bake time).
 pub const GATHER_RATIO: usize = 32;
 
 /// Joined lists longer than this are sorted on every thread by [`merge_owned`].
@@ -46,7 +46,7 @@ pub const VANISHED: u32 = u32::MAX - 1;
 
 /// Level-0 samples a cluster stands for, with the Morton code of where they lie over the
 /// mesh: the sort key, so that a group's samples come in spatial order (queries then start
-/// near their answer, runs of them form patches and balls).
+/// near their answer, and runs of them form balls).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Owned {
     /// Morton code of the triangle's centroid (of the first triangle, for a ball).
