@@ -14,7 +14,7 @@
 //! Groups that deviate far more than meshoptimizer estimates (outliers) are simplified again
 //! with their worst spots locked ([`measure_simplified`]).
 
-use crate::samples::{sample_point, set_bits, Owned, Samples, CENTROID, NOT_FOUND, VANISHED};
+use crate::samples::{sample_point, set_bits, Owned, Samples, NOT_FOUND, VANISHED};
 use crate::settings::BakeSettings;
 use crate::simplify::{simplify_group, Locks, Simplified};
 use crate::weld::WeldedMesh;
@@ -36,11 +36,6 @@ pub const SAMPLING_MARGIN: f64 = 1.0;
 /// the result with the smaller error is kept. Such groups (a few dozen of the dragon's 887)
 /// would otherwise pass their error on to every ancestor. Measured: see docs/BENCHMARKS.md.
 pub const OUTLIER_RATIO: f64 = 4.0;
-
-/// A level-0 triangle whose radius is at most this fraction of the members' error is measured
-/// at its centroid plus its radius (see `Sides::small`): it loosens the bound by at most about
-/// this fraction, and measures one point instead of about three.
-const SMALL_TRIANGLE: f64 = 0.05;
 
 /// Re-simplifications of one outlier group at most; each locks more.
 const OUTLIER_RETRIES: usize = 3;
@@ -100,8 +95,7 @@ pub fn measure_simplified(
     part_size: &[f32],
 ) -> Measured {
     let (members, triangles, errors) = (reference.members_error, &reference.triangles[..], &reference.errors);
-    let small = SMALL_TRIANGLE * members as f64;
-    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.owned, small, members: input };
+    let sides = Sides { input: triangles, triangle_errors: errors, owned: reference.owned, members: input };
     // Samples farther than the outlier ratio × the estimate are kept with their distances:
     // the spots that set an outlier's error are among them (see `Far`). The measure starts
     // from the members' error, which the stored error is at least: a query stops at any
@@ -167,7 +161,7 @@ pub fn group_error(
     simplifier_error: f32,
 ) -> f32 {
     let errors = vec![members_error; input.len() / 3];
-    let sides = Sides { input, triangle_errors: &errors, owned: None, small: 0.0, members: input };
+    let sides = Sides { input, triangle_errors: &errors, owned: None, members: input };
     let (total, _, _) = measure(mesh, &sides, output, part_size, simplifier_error as f64, None, None);
     stored(total, simplifier_error).max(members_error)
 }
@@ -178,22 +172,10 @@ struct Sides<'a> {
     input: &'a [u32],
     triangle_errors: &'a [f32],
     owned: Option<&'a [Owned]>,
-    /// With `owned`: a triangle whose corners are all within this of its centroid is measured
-    /// at its centroid only, with that radius added, like a ball (see [`crate::samples`]).
-    /// Upper levels, whose errors dwarf the level-0 triangles, then measure one point per
-    /// triangle where its samples are not gathered into balls.
-    small: f64,
     /// The members' triangles (welded ids; `input` itself without `owned`). An output
     /// triangle among them was measured when its member was made, within that member's error,
     /// which the stored error is at least: it is not measured again, nor its edges.
     members: &'a [u32],
-}
-
-/// Largest distance from a triangle's centroid to its corners (so to any of its points).
-fn radius(t: &Triangle<f32>) -> f32 {
-    let c = sample_point(t, 6);
-    t.iter().map(|p| (0..3).map(|k| (p[k] - c[k]) * (p[k] - c[k])).sum::<f32>().sqrt()).fold(0.0, f32::max)
-        * (1.0 + 1e-5)
 }
 
 /// The whole level-0 surface of a welded mesh, in object coordinates, for measuring output
@@ -397,16 +379,11 @@ fn measure(
     // centre, see `crate::samples`).
     let mut reach_of = vec![0.0f32; input_tris.len()];
     if let Some(owned) = sides.owned {
-        let entries = input_duty.par_iter_mut().zip(&mut reach_of).zip(&input_tris);
-        entries.zip(owned).for_each(|(((d, r), tri), o)| {
+        let entries = input_duty.par_iter_mut().zip(&mut reach_of);
+        entries.zip(owned).for_each(|((d, r), o)| {
             *d &= o.bits();
             if let Some(b) = o.ball() {
                 *r = b.radius;
-            } else if *d != 0 {
-                let radius = radius(tri);
-                if (radius as f64) <= sides.small {
-                    (*d, *r) = (CENTROID, radius);
-                }
             }
         });
     }
@@ -824,6 +801,7 @@ fn duties(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::samples::CENTROID;
     use crate::weld::weld;
     use mres_import::SourceMesh;
 
@@ -852,8 +830,7 @@ mod tests {
         let [Owned { samples: Samples::Ball(ball), .. }] = &balls[..] else { panic!("one ball: {balls:?}") };
         let corners: Vec<u32> = balls.iter().flat_map(|o| o.corners()).collect();
         let errors = vec![0.0; balls.len()];
-        let sides =
-            Sides { input: &corners, triangle_errors: &errors, owned: Some(&balls), small: 0.0, members: &input };
+        let sides = Sides { input: &corners, triangle_errors: &errors, owned: Some(&balls), members: &input };
         let original = Original::new(&w, &crate::partition::triangle_order(&w));
         // The peak is `h` above the flat output; the ball is measured at its centre only.
         let (worst, _, found) = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original));
@@ -955,7 +932,7 @@ mod tests {
         let input = w.indices.clone();
         let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
         let errors = vec![0.0; owned.len()];
-        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), small: 0.0, members: &input };
+        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), members: &input };
         let total = |floor: f64| measure(&w, &sides, &output, &sizes, floor, None, Some(&original)).0;
         // A group stores at least its members' error: measuring from it gives the same value.
         let exact = total(0.0);
@@ -1004,7 +981,7 @@ mod tests {
         let input = w.indices.clone();
         let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
         let errors = vec![0.0; owned.len()];
-        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), small: 0.0, members: &input };
+        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), members: &input };
         let at = |v: u32| w.positions[v as usize];
         let exact = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original)).0;
         for floor in [0.0, 0.5 * exact, 3.0 * exact] {
@@ -1030,7 +1007,7 @@ mod tests {
         let id = |v: u32| w.position_ids[v as usize];
         let peak = (0..w.positions.len() as u32).find(|&v| w.positions[v as usize][2] > 0.0).unwrap();
         let errors = vec![0.0; input.len() / 3];
-        let sides = Sides { input: &input, triangle_errors: &errors, owned: None, small: 0.0, members: &input };
+        let sides = Sides { input: &input, triangle_errors: &errors, owned: None, members: &input };
         let (worst, far, _) = measure(&w, &sides, &output, &sizes, 0.0, Some(0.1), None);
         // The peak (0.25 above the output) was found beyond the bound, so it is recorded; the
         // hot positions are the peak's and those of every input triangle using it (all four).
@@ -1063,7 +1040,7 @@ mod tests {
         let input: Vec<u32> = (0..4).flat_map(|k| [c[k], c[(k + 1) % 4], peak]).collect();
         let output = vec![c[0], c[1], c[2], c[0], c[2], c[3]];
         let owned = [Owned::triangle(0, level0, 0x7f)];
-        let sides = Sides { input: &level0, triangle_errors: &[0.0], owned: Some(&owned), small: 0.0, members: &input };
+        let sides = Sides { input: &level0, triangle_errors: &[0.0], owned: Some(&owned), members: &input };
         let sizes = vec![10.0; w.position_count];
         let original = Original::new(&w, &crate::partition::triangle_order(&w));
         let (worst, far, _) = measure(&w, &sides, &output, &sizes, 0.0, Some(0.1), Some(&original));
@@ -1094,7 +1071,7 @@ mod tests {
         let sizes = part_sizes(&w);
         let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
         let errors = vec![0.0; owned.len()];
-        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), small: 0.0, members: &input };
+        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), members: &input };
         let original = Original::new(&w, &crate::partition::triangle_order(&w));
         let (worst, _, found) = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original));
         // a counts for its size at most, 0.07, within the peak's 0.25 by the time its corners
