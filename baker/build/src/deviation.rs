@@ -924,16 +924,40 @@ mod tests {
         assert_eq!(duty, vec![0, 0, CENTROID | 16]);
     }
 
+    /// [`bumpy`] measured as a group of level 1 is: its level-0 samples against its output.
+    struct Level1 {
+        w: WeldedMesh,
+        output: Vec<u32>,
+        owned: Vec<Owned>,
+        errors: Vec<f32>,
+        sizes: Vec<f32>,
+        original: Original,
+    }
+
+    impl Level1 {
+        fn new(n: u32) -> Level1 {
+            let (w, output) = bumpy(n);
+            let (sizes, original) = (part_sizes(&w), Original::new(&w, &crate::partition::triangle_order(&w)));
+            let owned: Vec<Owned> =
+                w.indices.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
+            let errors = vec![0.0; owned.len()];
+            Level1 { w, output, owned, errors, sizes, original }
+        }
+
+        /// The measure from the starting bound `floor`: the error and each sample's triangle.
+        fn measure(&self, floor: f64) -> (f64, Vec<u32>) {
+            let input = &self.w.indices;
+            let sides = Sides { input, triangle_errors: &self.errors, owned: Some(&self.owned), members: input };
+            let (worst, _, found) =
+                measure(&self.w, &sides, &self.output, &self.sizes, floor, None, Some(&self.original));
+            (worst, found)
+        }
+    }
+
     #[test]
     fn the_starting_bound_only_decides_where_queries_stop() {
-        let (w, output) = bumpy(8);
-        let sizes = part_sizes(&w);
-        let original = Original::new(&w, &crate::partition::triangle_order(&w));
-        let input = w.indices.clone();
-        let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
-        let errors = vec![0.0; owned.len()];
-        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), members: &input };
-        let total = |floor: f64| measure(&w, &sides, &output, &sizes, floor, None, Some(&original)).0;
+        let group = Level1::new(8);
+        let total = |floor: f64| group.measure(floor).0;
         // A group stores at least its members' error: measuring from it gives the same value.
         let exact = total(0.0);
         assert!(exact > 0.1, "{exact}");
@@ -975,17 +999,12 @@ mod tests {
     fn every_sample_found_at_a_triangle_lies_within_the_error_of_it() {
         // The hand-down gives each measured sample to the cluster of the triangle it was found
         // at, which must be within the group's error of it, also where the last query settled it.
-        let (w, output) = bumpy(16);
-        let sizes = part_sizes(&w);
-        let original = Original::new(&w, &crate::partition::triangle_order(&w));
-        let input = w.indices.clone();
-        let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
-        let errors = vec![0.0; owned.len()];
-        let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), members: &input };
+        let group = Level1::new(16);
+        let (w, output, input) = (&group.w, &group.output, &group.w.indices);
         let at = |v: u32| w.positions[v as usize];
-        let exact = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original)).0;
+        let exact = group.measure(0.0).0;
         for floor in [0.0, 0.5 * exact, 3.0 * exact] {
-            let (worst, _, found) = measure(&w, &sides, &output, &sizes, floor, None, Some(&original));
+            let (worst, found) = group.measure(floor);
             let mut checked = 0;
             for (i, t) in input.chunks_exact(3).enumerate() {
                 let tri = [at(t[0]), at(t[1]), at(t[2])];
