@@ -624,26 +624,27 @@ impl InputSide<'_> {
                     slots.fill(VANISHED);
                     continue;
                 }
+                // The output triangle sample `b` is found at; a ball, measured at its centre,
+                // is found there whole.
+                let ball = self.reach[i] > 0.0;
+                let place = |slots: &mut [u32], b: usize, t: usize| {
+                    if ball {
+                        slots.fill(t as u32);
+                    } else {
+                        slots[b] = t as u32;
+                    }
+                };
                 for b in set_bits(self.duty[i] & pass) {
                     let enough = limits.enough2(worst, e as f64);
                     let p = sample_point(tri, b);
                     if last.settles(p, enough) {
                         // Within the bound of the last query's triangle (see `Last`).
-                        if self.reach[i] > 0.0 {
-                            slots.fill(hint as u32);
-                        } else {
-                            slots[b] = hint as u32;
-                        }
+                        place(slots, b, hint);
                         continue;
                     }
                     let (d2, nearest) = output.nearest_squared(p, enough, hint, STEPS);
                     (hint, last) = (nearest, Last { point: p, distance: d2.sqrt() });
-                    if self.reach[i] > 0.0 {
-                        // A ball, measured at its centre.
-                        slots.fill(nearest as u32);
-                    } else {
-                        slots[b] = nearest as u32;
-                    }
+                    place(slots, b, nearest);
                     // A point farther than its part's size counts as that: the part vanished
                     // (looked up only beyond `enough`, where the capped value can matter).
                     let d2 = if d2 > enough { d2.min(size() * size()) } else { d2 };

@@ -18,7 +18,7 @@ use crate::settings::{BakeSettings, ErrorBound};
 use crate::simplify::{self, simplify_group, Locks, Method};
 use crate::weld::WeldedMesh;
 use mres_format::NO_GROUP;
-use mres_geom::edges::{edge_keys, sorted_edge_keys};
+use mres_geom::edges::{edge_ends, edge_keys, sorted_edge_keys};
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
@@ -637,8 +637,9 @@ fn cell_borders(mesh: &WeldedMesh, clusters: &[BuiltCluster]) -> Vec<bool> {
     let mut border = vec![false; mesh.position_count];
     for run in edges.chunk_by(|a, b| a == b) {
         if (run.len() - open::count(&marked, run[0])) % 2 == 1 {
-            border[(run[0] >> 32) as usize] = true;
-            border[(run[0] & 0xffff_ffff) as usize] = true;
+            for p in edge_ends(run[0]) {
+                border[p as usize] = true;
+            }
         }
     }
     border
