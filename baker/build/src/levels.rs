@@ -473,7 +473,12 @@ impl<'a> Builder<'a> {
 
     /// What a part's result is measured against: the level-0 triangles under it (`owned`,
     /// errors 0: nothing adds up), or where those are not at hand (a later shard stage) its
-    /// members' triangles (`merged`), each with its member's error.
+    /// members' triangles (`merged`), each with its member's error. Where the level-0 samples
+    /// are at hand, a part may own none (every one vanished: its parts are smaller than the
+    /// error, which they can raise no more): its result is then measured against the original
+    /// surface only. (Measured against its members instead, each with its error, the top
+    /// groups of 250 boxes added up their errors level by level: 1.5 to 7.4 where the
+    /// boxes' size, 1.5, bounds every vanished point.)
     fn reference<'r>(
         &'r self,
         part: &[u32],
@@ -482,7 +487,7 @@ impl<'a> Builder<'a> {
         members_error: f32,
         lenient: bool,
     ) -> Reference<'r> {
-        if owned.is_empty() {
+        if self.original.is_none() {
             let members = part.iter().map(|&c| &self.clusters[self.pending[c as usize]]);
             let errors = members.flat_map(|m| std::iter::repeat_n(m.own_error, m.indices.len() / 3)).collect();
             let triangles = Cow::Borrowed(merged);

@@ -81,6 +81,31 @@ fn thousand_disconnected_boxes_reach_one_root_cluster() {
 }
 
 #[test]
+fn errors_of_groups_whose_parts_all_vanished_do_not_add_up() {
+    // 250 flat boxes: their simplification is exact, and a box that vanishes counts its own
+    // size at most (docs/INVARIANTS.md §4), so no group's error exceeds the largest box's
+    // diagonal. At the top levels every level-0 sample has vanished; measured against their
+    // members plus the members' errors instead of the original, the errors added up level by
+    // level (1.5 to 7.4).
+    let mesh = generate::boxes(250, 4);
+    let per_box = mesh.positions.len() / 250;
+    let diagonal = |points: &[[f32; 3]]| {
+        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+        for p in points {
+            for k in 0..3 {
+                (lo[k], hi[k]) = (lo[k].min(p[k]), hi[k].max(p[k]));
+            }
+        }
+        (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f32>().sqrt()
+    };
+    let largest = mesh.positions.chunks_exact(per_box).map(diagonal).fold(0.0, f32::max);
+    let (file, _) = check(bake(mesh), 50);
+    let errors: Vec<f32> = file.groups.iter().map(|g| g.error).filter(|e| e.is_finite()).collect();
+    let worst = errors.iter().copied().fold(0.0, f32::max);
+    assert!(worst <= largest * 1.001, "group error {worst} beyond the largest box's diagonal {largest}: {errors:?}");
+}
+
+#[test]
 fn uv_seams_and_materials_survive() {
     let mesh = generate::seamed_sphere(30);
     let per_material = 2 * 30 * 30;
