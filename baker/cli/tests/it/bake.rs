@@ -90,12 +90,7 @@ fn errors_of_groups_whose_parts_all_vanished_do_not_add_up() {
     let mesh = generate::boxes(250, 4);
     let per_box = mesh.positions.len() / 250;
     let diagonal = |points: &[[f32; 3]]| {
-        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
-        for p in points {
-            for k in 0..3 {
-                (lo[k], hi[k]) = (lo[k].min(p[k]), hi[k].max(p[k]));
-            }
-        }
+        let (lo, hi) = mres_import::mesh::bounds(points).expect("a box has corners");
         (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f32>().sqrt()
     };
     let largest = mesh.positions.chunks_exact(per_box).map(diagonal).fold(0.0, f32::max);
