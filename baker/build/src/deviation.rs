@@ -826,13 +826,13 @@ mod tests {
         let (w, input, output) = tent(0.25);
         let sizes = part_sizes(&w);
         let h = w.positions.iter().map(|p| p[2]).fold(0.0f32, f32::max) as f64;
-        let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
+        let owned = every_sample(&input);
         let balls = crate::samples::gather(&w, owned, 10.0, &sizes);
         let [Owned { samples: Samples::Ball(ball), .. }] = &balls[..] else { panic!("one ball: {balls:?}") };
         let corners: Vec<u32> = balls.iter().flat_map(|o| o.corners()).collect();
         let errors = vec![0.0; balls.len()];
         let sides = Sides { input: &corners, triangle_errors: &errors, owned: Some(&balls), members: &input };
-        let original = Original::new(&w, &crate::partition::triangle_order(&w));
+        let original = original_of(&w);
         // The peak is `h` above the flat output; the ball is measured at its centre only.
         let (worst, _, found) = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original));
         assert!(worst >= h && worst <= h + 2.0 * ball.radius as f64, "{worst} vs peak {h}, {ball:?}");
@@ -885,7 +885,7 @@ mod tests {
     #[test]
     fn the_original_surface_measure_is_exact_from_any_start() {
         let (w, output) = bumpy(8);
-        let original = Original::new(&w, &crate::partition::triangle_order(&w));
+        let original = original_of(&w);
         // Each position's starting triangle uses it.
         for (p, &t) in original.at_position.iter().enumerate() {
             let corners = original.corners(&w, t as usize);
@@ -925,6 +925,16 @@ mod tests {
         assert_eq!(duty, vec![0, 0, CENTROID | 16]);
     }
 
+    /// The whole level-0 surface of `w`, in its triangle order, as a build makes it.
+    fn original_of(w: &WeldedMesh) -> Original {
+        Original::new(w, &crate::partition::triangle_order(w))
+    }
+
+    /// Every sample of each triangle of `indices`, one entry per triangle.
+    fn every_sample(indices: &[u32]) -> Vec<Owned> {
+        indices.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect()
+    }
+
     /// [`bumpy`] measured as a group of level 1 is: its level-0 samples against its output.
     struct Level1 {
         w: WeldedMesh,
@@ -938,9 +948,8 @@ mod tests {
     impl Level1 {
         fn new(n: u32) -> Level1 {
             let (w, output) = bumpy(n);
-            let (sizes, original) = (part_sizes(&w), Original::new(&w, &crate::partition::triangle_order(&w)));
-            let owned: Vec<Owned> =
-                w.indices.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
+            let (sizes, original) = (part_sizes(&w), original_of(&w));
+            let owned = every_sample(&w.indices);
             let errors = vec![0.0; owned.len()];
             Level1 { w, output, owned, errors, sizes, original }
         }
@@ -1062,7 +1071,7 @@ mod tests {
         let owned = [Owned::triangle(0, level0, 0x7f)];
         let sides = Sides { input: &level0, triangle_errors: &[0.0], owned: Some(&owned), members: &input };
         let sizes = vec![10.0; w.position_count];
-        let original = Original::new(&w, &crate::partition::triangle_order(&w));
+        let original = original_of(&w);
         let (worst, far, _) = measure(&w, &sides, &output, &sizes, 0.0, Some(0.1), Some(&original));
         assert!(worst > 0.85, "{worst}");
         // Only the level-0 samples are that far: the output is within 0.5 of the tent.
@@ -1089,10 +1098,10 @@ mod tests {
             [0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4, 5, 6, 7, 8, 9, 10].map(|v| at(positions[v])).to_vec();
         let output: Vec<u32> = [0, 1, 2, 0, 2, 3].map(|v| at(positions[v])).to_vec();
         let sizes = part_sizes(&w);
-        let owned: Vec<Owned> = input.chunks_exact(3).map(|t| Owned::triangle(0, [t[0], t[1], t[2]], 0x7f)).collect();
+        let owned = every_sample(&input);
         let errors = vec![0.0; owned.len()];
         let sides = Sides { input: &input, triangle_errors: &errors, owned: Some(&owned), members: &input };
-        let original = Original::new(&w, &crate::partition::triangle_order(&w));
+        let original = original_of(&w);
         let (worst, _, found) = measure(&w, &sides, &output, &sizes, 0.0, None, Some(&original));
         // a counts for its size at most, 0.07, within the peak's 0.25 by the time its corners
         // are met: it is marked without a query. b counts for its size, 0.57: its corners are
