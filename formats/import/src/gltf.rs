@@ -31,6 +31,9 @@ use super::{
 use crate::scene::{ImportedScene, Mat4, SceneInstance, SceneMesh, IDENTITY};
 use crate::SourceMesh;
 
+mod attributes;
+mod meshopt;
+
 /// Most node instances a scene may expand to. A node graph that reuses nodes (a DAG) can
 /// expand exponentially; real scenes stay far below this.
 const MAX_NODE_INSTANCES: u64 = 1 << 24;
@@ -54,8 +57,11 @@ struct Plan {
     mesh_attributes: Vec<(bool, bool)>,
     /// Per mesh index, (vertices, triangles) of one copy: capacity hints.
     mesh_sizes: Vec<(u64, u64)>,
-    /// Per buffer index, whether a checked accessor reads from it.
+    /// Per buffer index, whether a checked accessor reads from it, or a compressed view of
+    /// such a buffer is decoded from it.
     used_buffers: Vec<bool>,
+    /// The views stored compressed (EXT_meshopt_compression).
+    compressed: meshopt::Compressed,
     vertices: u64,
     triangles: u64,
 }
@@ -69,7 +75,7 @@ pub(super) fn import(path: &Path, bytes: &[u8], kind: InputKind, limits: &Import
     let document = parse_document(json_bytes)?;
     // Count first, check against the limits, and only then expand the node graph: a small file
     // can describe millions of instances.
-    let plan = plan(&document, &mesh_instance_counts(&document)?, limits)?;
+    let plan = plan(json_bytes, &document, &mesh_instance_counts(&document)?, limits)?;
     let instances = scene_instances(&document, &plan)?;
     let buffers = load_buffers(&document, &plan, &asset_dir(path), bin, limits)?;
     read_mesh(&document, &instances, &plan, &buffers)
@@ -87,7 +93,7 @@ pub(super) fn import_scene(
 ) -> KindResult<ImportedScene> {
     let (json_bytes, bin) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
-    let plan = plan(&document, &mesh_instance_counts(&document)?, limits)?;
+    let plan = plan(json_bytes, &document, &mesh_instance_counts(&document)?, limits)?;
     let instances = scene_instances(&document, &plan)?;
     let buffers = load_buffers(&document, &plan, &asset_dir(path), bin, limits)?;
     let material_names = document.materials().map(|m| m.name().map(str::to_owned)).collect();
@@ -158,7 +164,7 @@ pub(super) fn outline(bytes: &[u8], kind: InputKind) -> KindResult<(Vec<Option<S
     let document = parse_document(json_bytes)?;
     let names = document.materials().map(|m| m.name().map(str::to_owned)).collect();
     let counts = mesh_instance_counts(&document)?;
-    let plan = plan(&document, &counts, &ImportLimits::default())?;
+    let plan = plan(json_bytes, &document, &counts, &ImportLimits::default())?;
     let instanced = counts.iter().zip(&plan.primitives).any(|(&n, p)| n >= 2 && !p.is_empty());
     Ok((names, instanced))
 }
@@ -167,11 +173,11 @@ pub(super) fn outline(bytes: &[u8], kind: InputKind) -> KindResult<(Vec<Option<S
 pub(super) fn referenced_files(path: &Path, bytes: &[u8], kind: InputKind) -> KindResult<Vec<PathBuf>> {
     let (json_bytes, _) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
-    let plan = plan(&document, &mesh_instance_counts(&document)?, &ImportLimits::default())?;
+    let plan = plan(json_bytes, &document, &mesh_instance_counts(&document)?, &ImportLimits::default())?;
     let dir = asset_dir(path);
     let mut files = Vec::new();
     for buffer in document.buffers() {
-        if !plan.used_buffers[buffer.index()] {
+        if !plan.used_buffers[buffer.index()] || plan.compressed.is_placeholder(buffer.index()) {
             continue;
         }
         if let Source::Uri(uri) = buffer.source() {
@@ -238,9 +244,12 @@ fn split_glb(bytes: &[u8]) -> KindResult<(&[u8], Option<&[u8]>)> {
 fn parse_document(json_bytes: &[u8]) -> KindResult<Document> {
     let mut root: json::Root = json::deserialize::from_slice(json_bytes)
         .map_err(|e| ImportErrorKind::Parse(format!("invalid glTF JSON: {e}")))?;
-    if let Some(extension) = root.extensions_required.first() {
+    if let Some(extension) = root.extensions_required.iter().find(|e| !importable(e)) {
         return Err(ImportErrorKind::UnsupportedGltfExtension(extension.clone()));
     }
+    // The crate's validator refuses required extensions it does not know; those allowed
+    // above are handled here or change nothing read here.
+    root.extensions_required.clear();
     prepare_positions(&mut root)?;
     Document::from_json(root).map_err(|e| match e {
         ::gltf::Error::Validation(errors) => {
@@ -251,6 +260,27 @@ fn parse_document(json_bytes: &[u8]) -> KindResult<Document> {
         }
         other => ImportErrorKind::Parse(format!("invalid glTF: {other}")),
     })
+}
+
+/// Whether a file that requires `extension` (`extensionsRequired`) can be imported: one
+/// decoded here, or one that changes nothing this importer reads (it reads geometry, and materials by index and name:
+/// material models, texture formats and transforms, lights). The decoded ones:
+/// KHR_mesh_quantization (integer attributes, see `attributes`) and EXT_meshopt_compression
+/// (compressed buffer views, see `meshopt`). Any other (Draco, GPU instancing, one unknown)
+/// could change the geometry: refused.
+fn importable(extension: &str) -> bool {
+    const NEUTRAL: [&str; 8] = [
+        "KHR_texture_transform",
+        "KHR_texture_basisu",
+        "EXT_texture_webp",
+        "EXT_texture_avif",
+        "MSFT_texture_dds",
+        "KHR_lights_punctual",
+        "EXT_lights_image_based",
+        "KHR_xmp_json_ld",
+    ];
+    let decoded = ["KHR_mesh_quantization", "EXT_meshopt_compression"];
+    decoded.contains(&extension) || extension.starts_with("KHR_materials_") || NEUTRAL.contains(&extension)
 }
 
 /// Checks POSITION accessor indices before the crate's validator indexes with them, and
@@ -398,10 +428,12 @@ fn expanded_sizes(document: &Document) -> KindResult<Vec<u64>> {
     Ok(size)
 }
 
-/// Checks every primitive of every instanced mesh and sizes the result against `limits`.
-fn plan(document: &Document, instance_count: &[u64], limits: &ImportLimits) -> KindResult<Plan> {
+/// Checks every primitive of every instanced mesh and sizes the result against `limits`;
+/// `json_bytes` is the document's JSON, for the compressed views (see `meshopt`).
+fn plan(json_bytes: &[u8], document: &Document, instance_count: &[u64], limits: &ImportLimits) -> KindResult<Plan> {
     let mesh_count = document.meshes().len();
     let mut plan = Plan {
+        compressed: meshopt::Compressed::new(json_bytes)?,
         primitives: vec![Vec::new(); mesh_count],
         has_normals: true,
         has_uvs: true,
@@ -443,6 +475,7 @@ fn plan(document: &Document, instance_count: &[u64], limits: &ImportLimits) -> K
     }
     check_triangle_count(plan.triangles, limits)?;
     check_vertex_count(plan.vertices, limits)?;
+    plan.compressed.mark_sources(&mut plan.used_buffers);
     Ok(plan)
 }
 
@@ -493,10 +526,16 @@ enum Use {
 /// reading past the declared data; returns its element count and marks its buffers used.
 fn check_accessor(accessor: &Accessor, use_: Use, used_buffers: &mut [bool]) -> KindResult<usize> {
     let fail = |reason: String| ImportErrorKind::InvalidAccessor { accessor: accessor.index(), reason };
+    // Besides f32, the integer types KHR_mesh_quantization allows (see `attributes`).
+    let integers = [DataType::I8, DataType::U8, DataType::I16, DataType::U16];
     let (dimensions, types, name): (_, &[DataType], _) = match use_ {
-        Use::Position => (Dimensions::Vec3, &[DataType::F32], "POSITION"),
-        Use::Normal => (Dimensions::Vec3, &[DataType::F32], "NORMAL"),
-        Use::TexCoord => (Dimensions::Vec2, &[DataType::F32, DataType::U8, DataType::U16], "TEXCOORD_0"),
+        Use::Position => {
+            (Dimensions::Vec3, &[DataType::F32, integers[0], integers[1], integers[2], integers[3]], "POSITION")
+        }
+        Use::Normal => (Dimensions::Vec3, &[DataType::F32, DataType::I8, DataType::I16], "NORMAL"),
+        Use::TexCoord => {
+            (Dimensions::Vec2, &[DataType::F32, integers[0], integers[1], integers[2], integers[3]], "TEXCOORD_0")
+        }
         Use::Index => (Dimensions::Scalar, &[DataType::U8, DataType::U16, DataType::U32], "indices"),
     };
     if accessor.dimensions() != dimensions || !types.contains(&accessor.data_type()) {
@@ -505,6 +544,9 @@ fn check_accessor(accessor: &Accessor, use_: Use, used_buffers: &mut [bool]) -> 
             accessor.dimensions(),
             accessor.data_type()
         )));
+    }
+    if matches!(use_, Use::Normal) && accessor.data_type() != DataType::F32 && !accessor.normalized() {
+        return Err(fail(format!("{:?} NORMAL must be normalized", accessor.data_type())));
     }
     let count = accessor.count();
     let element = accessor.size();
@@ -585,7 +627,8 @@ fn load_buffers<'a>(
 ) -> KindResult<Buffers<'a>> {
     let mut buffers = Vec::with_capacity(plan.used_buffers.len());
     for buffer in document.buffers() {
-        if !plan.used_buffers[buffer.index()] {
+        // A placeholder of compressed views has no data to load: they are decoded into it.
+        if !plan.used_buffers[buffer.index()] || plan.compressed.is_placeholder(buffer.index()) {
             buffers.push(None);
             continue;
         }
@@ -613,6 +656,8 @@ fn load_buffers<'a>(
         }
         buffers.push(Some(data));
     }
+    let lengths: Vec<usize> = document.buffers().map(|b| b.length()).collect();
+    plan.compressed.decode(&mut buffers, &lengths, &plan.used_buffers, limits.max_file_bytes)?;
     Ok(buffers)
 }
 
@@ -744,19 +789,30 @@ fn read_primitive(
     material: u32,
     builder: &mut MeshBuilder,
 ) -> KindResult<()> {
-    let reader = primitive.reader(|b| buffers.get(b.index()).and_then(|d| d.as_deref()));
+    let data = |b: ::gltf::Buffer| buffers.get(b.index()).and_then(|d| d.as_deref());
+    let reader = primitive.reader(data);
     let unreadable = |accessor: Option<Accessor>| ImportErrorKind::InvalidAccessor {
         accessor: accessor.map_or(0, |a| a.index()),
         reason: "could not be read".into(),
     };
-
-    let positions = reader.read_positions().ok_or_else(|| unreadable(primitive.get(&Semantic::Positions)))?;
+    // Any component type the checks let through, as floats (see `attributes`).
+    let accessor = |semantic: Semantic| primitive.get(&semantic);
+    let floats3 = |semantic: Semantic| {
+        accessor(semantic.clone())
+            .and_then(|a| attributes::read::<3>(a, data))
+            .ok_or_else(|| unreadable(accessor(semantic)))
+    };
+    let positions = floats3(Semantic::Positions)?;
     let mut normals = match builder.has_normals() {
-        true => Some(reader.read_normals().ok_or_else(|| unreadable(primitive.get(&Semantic::Normals)))?),
+        true => Some(floats3(Semantic::Normals)?),
         false => None,
     };
     let mut uvs = match builder.has_uvs() {
-        true => Some(reader.read_tex_coords(0).ok_or_else(|| unreadable(None))?.into_f32()),
+        true => Some(
+            accessor(Semantic::TexCoords(0))
+                .and_then(|a| attributes::read::<2>(a, data))
+                .ok_or_else(|| unreadable(accessor(Semantic::TexCoords(0))))?,
+        ),
         false => None,
     };
     let base = builder.vertex_count();

@@ -38,15 +38,22 @@
 //!   and morph targets are ignored (bind pose).
 //! - Modes TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN, indexed or not; primitives of other
 //!   modes are skipped ([`ImportErrorKind::UnsupportedPrimitiveMode`] if nothing else is
-//!   left). Attributes: POSITION (f32), NORMAL (f32), TEXCOORD_0 (f32, or normalised u8/u16);
-//!   sparse accessors and interleaved views are supported.
+//!   left). Attributes: POSITION (f32), NORMAL (f32), TEXCOORD_0 (f32, or normalised u8/u16),
+//!   and with KHR_mesh_quantization (gltfpack's default output) POSITION as i8/u8/i16/u16
+//!   (normalised or not), NORMAL as normalised i8/i16, TEXCOORD_0 as i8/u8/i16/u16; sparse
+//!   accessors and interleaved views are supported. Buffer views compressed by
+//!   EXT_meshopt_compression (`gltfpack -c`, with its octahedral, quaternion and exponential
+//!   filters) are decoded with meshoptimizer's decoders.
 //! - Material index = the primitive's material, or the number of materials for primitives
 //!   without one.
 //! - Buffers: the GLB binary chunk, base64 `data:` URIs, or files given by relative
 //!   (percent-encoded) URIs inside the glTF file's directory; `..` escapes, absolute paths
 //!   and `file:` URIs are refused. Only buffers of imported primitives are loaded; images
-//!   are never read. A required extension (`extensionsRequired`: Draco, meshopt,
-//!   quantization) is an error.
+//!   are never read. A required extension (`extensionsRequired`) is an error unless it is
+//!   one of the two above or changes nothing read here (`KHR_materials_*`, texture formats
+//!   and `KHR_texture_transform`, lights): Draco, GPU instancing and unknown ones are refused.
+//!   UVs are read as stored: a texture's `KHR_texture_transform` (where gltfpack puts the
+//!   scale of quantized UVs) stays the material's to apply.
 //!
 //! # PLY
 //! - ASCII, binary little endian and binary big endian; read by hand (the module `ply` says
