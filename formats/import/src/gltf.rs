@@ -32,6 +32,7 @@ use crate::scene::{ImportedScene, Mat4, SceneInstance, SceneMesh, IDENTITY};
 use crate::SourceMesh;
 
 mod attributes;
+mod gpu_instancing;
 mod meshopt;
 
 /// Most node instances a scene may expand to. A node graph that reuses nodes (a DAG) can
@@ -62,6 +63,8 @@ struct Plan {
     used_buffers: Vec<bool>,
     /// The views stored compressed (EXT_meshopt_compression).
     compressed: meshopt::Compressed,
+    /// The nodes that draw their mesh several times (EXT_mesh_gpu_instancing).
+    instancing: gpu_instancing::GpuInstancing,
     vertices: u64,
     triangles: u64,
 }
@@ -75,9 +78,9 @@ pub(super) fn import(path: &Path, bytes: &[u8], kind: InputKind, limits: &Import
     let document = parse_document(json_bytes)?;
     // Count first, check against the limits, and only then expand the node graph: a small file
     // can describe millions of instances.
-    let plan = plan(json_bytes, &document, &mesh_instance_counts(&document)?, limits)?;
-    let instances = scene_instances(&document, &plan)?;
+    let (_, plan) = checked(json_bytes, &document, limits)?;
     let buffers = load_buffers(&document, &plan, &asset_dir(path), bin, limits)?;
+    let instances = scene_instances(&document, &plan, &buffers)?;
     read_mesh(&document, &instances, &plan, &buffers)
 }
 
@@ -93,9 +96,9 @@ pub(super) fn import_scene(
 ) -> KindResult<ImportedScene> {
     let (json_bytes, bin) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
-    let plan = plan(json_bytes, &document, &mesh_instance_counts(&document)?, limits)?;
-    let instances = scene_instances(&document, &plan)?;
+    let (_, plan) = checked(json_bytes, &document, limits)?;
     let buffers = load_buffers(&document, &plan, &asset_dir(path), bin, limits)?;
+    let instances = scene_instances(&document, &plan, &buffers)?;
     let material_names = document.materials().map(|m| m.name().map(str::to_owned)).collect();
     let mut scene = ImportedScene { meshes: Vec::new(), instances: Vec::new(), material_names };
     let mut uses = vec![0usize; document.meshes().len()];
@@ -163,8 +166,7 @@ pub(super) fn outline(bytes: &[u8], kind: InputKind) -> KindResult<(Vec<Option<S
     let (json_bytes, _) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
     let names = document.materials().map(|m| m.name().map(str::to_owned)).collect();
-    let counts = mesh_instance_counts(&document)?;
-    let plan = plan(json_bytes, &document, &counts, &ImportLimits::default())?;
+    let (counts, plan) = checked(json_bytes, &document, &ImportLimits::default())?;
     let instanced = counts.iter().zip(&plan.primitives).any(|(&n, p)| n >= 2 && !p.is_empty());
     Ok((names, instanced))
 }
@@ -173,7 +175,7 @@ pub(super) fn outline(bytes: &[u8], kind: InputKind) -> KindResult<(Vec<Option<S
 pub(super) fn referenced_files(path: &Path, bytes: &[u8], kind: InputKind) -> KindResult<Vec<PathBuf>> {
     let (json_bytes, _) = split_container(bytes, kind)?;
     let document = parse_document(json_bytes)?;
-    let plan = plan(json_bytes, &document, &mesh_instance_counts(&document)?, &ImportLimits::default())?;
+    let (_, plan) = checked(json_bytes, &document, &ImportLimits::default())?;
     let dir = asset_dir(path);
     let mut files = Vec::new();
     for buffer in document.buffers() {
@@ -263,11 +265,12 @@ fn parse_document(json_bytes: &[u8]) -> KindResult<Document> {
 }
 
 /// Whether a file that requires `extension` (`extensionsRequired`) can be imported: one
-/// decoded here, or one that changes nothing this importer reads (it reads geometry, and materials by index and name:
-/// material models, texture formats and transforms, lights). The decoded ones:
-/// KHR_mesh_quantization (integer attributes, see `attributes`) and EXT_meshopt_compression
-/// (compressed buffer views, see `meshopt`). Any other (Draco, GPU instancing, one unknown)
-/// could change the geometry: refused.
+/// decoded here, or one that changes nothing this importer reads (it reads geometry, and
+/// materials by index and name: material models, texture formats and transforms, lights).
+/// The decoded ones: KHR_mesh_quantization (integer attributes, see `attributes`),
+/// EXT_meshopt_compression (compressed buffer views, see `meshopt`) and
+/// EXT_mesh_gpu_instancing (a node's copies, see `gpu_instancing`). Any other (Draco, one
+/// unknown) could change the geometry: refused.
 fn importable(extension: &str) -> bool {
     const NEUTRAL: [&str; 8] = [
         "KHR_texture_transform",
@@ -279,7 +282,7 @@ fn importable(extension: &str) -> bool {
         "EXT_lights_image_based",
         "KHR_xmp_json_ld",
     ];
-    let decoded = ["KHR_mesh_quantization", "EXT_meshopt_compression"];
+    let decoded = ["KHR_mesh_quantization", "EXT_meshopt_compression", "EXT_mesh_gpu_instancing"];
     decoded.contains(&extension) || extension.starts_with("KHR_materials_") || NEUTRAL.contains(&extension)
 }
 
@@ -315,10 +318,20 @@ fn prepare_positions(root: &mut json::Root) -> KindResult<()> {
     Ok(())
 }
 
-/// How many times each mesh is instanced by the scene to import, without expanding the node
-/// graph (a small file can describe millions of instances). Rejects cycles and scenes of more
-/// than `MAX_NODE_INSTANCES` node instances.
-fn mesh_instance_counts(document: &Document) -> KindResult<Vec<u64>> {
+/// How many times the scene places each mesh ([`mesh_instance_counts`]), and the [`Plan`]:
+/// every check before a buffer is read.
+fn checked(json_bytes: &[u8], document: &Document, limits: &ImportLimits) -> KindResult<(Vec<u64>, Plan)> {
+    let instancing = gpu_instancing::GpuInstancing::new(json_bytes)?;
+    let counts = mesh_instance_counts(document, &instancing)?;
+    let plan = plan(json_bytes, document, &counts, limits, instancing)?;
+    Ok((counts, plan))
+}
+
+/// How many times each mesh is instanced by the scene to import (a node's GPU instances, see
+/// `gpu_instancing`, counted as node instances), without expanding the node graph (a small
+/// file can describe millions of instances). Rejects cycles and scenes of more than
+/// `MAX_NODE_INSTANCES` node instances or mesh placements.
+fn mesh_instance_counts(document: &Document, instancing: &gpu_instancing::GpuInstancing) -> KindResult<Vec<u64>> {
     if document.meshes().len() == 0 {
         return Err(ImportErrorKind::NoMeshes);
     }
@@ -346,9 +359,11 @@ fn mesh_instance_counts(document: &Document) -> KindResult<Vec<u64>> {
     }
     let mut ready: Vec<usize> = (0..nodes.len()).filter(|&n| incoming[n] == 0).collect();
     let mut per_mesh = vec![0u64; document.meshes().len()];
+    let mut scratch = vec![false; document.buffers().len()];
     while let Some(n) = ready.pop() {
         if let Some(mesh) = nodes[n].mesh() {
-            per_mesh[mesh.index()] = per_mesh[mesh.index()].saturating_add(count[n]);
+            let copies = count[n].saturating_mul(instancing.copies(document, n, &mut scratch)?);
+            per_mesh[mesh.index()] = per_mesh[mesh.index()].saturating_add(copies);
         }
         for child in nodes[n].children() {
             let c = child.index();
@@ -359,12 +374,19 @@ fn mesh_instance_counts(document: &Document) -> KindResult<Vec<u64>> {
             }
         }
     }
+    let placements = per_mesh.iter().fold(0u64, |sum, &n| sum.saturating_add(n));
+    if placements > MAX_NODE_INSTANCES {
+        return Err(ImportErrorKind::TooLarge(format!(
+            "the scene places meshes {placements} times, the limit is {MAX_NODE_INSTANCES}"
+        )));
+    }
     Ok(per_mesh)
 }
 
 /// The meshes of the scene to import that have triangles to read (`plan`), with their world
-/// transforms, in depth-first order. Call after `plan` has checked the counts.
-fn scene_instances(document: &Document, plan: &Plan) -> KindResult<Vec<Instance>> {
+/// transforms, in depth-first order (a node's GPU instances in their order). Call after `plan`
+/// has checked the counts, with the `buffers` loaded.
+fn scene_instances(document: &Document, plan: &Plan, buffers: &Buffers) -> KindResult<Vec<Instance>> {
     let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
         let all = document.meshes().map(|mesh| Instance { mesh: mesh.index(), transform: IDENTITY, node: None });
         return Ok(all.collect());
@@ -375,7 +397,11 @@ fn scene_instances(document: &Document, plan: &Plan) -> KindResult<Vec<Instance>
     while let Some((node, parent)) = stack.pop() {
         let world = multiply(&parent, &node.transform().matrix());
         if let Some(mesh) = node.mesh().filter(|m| !plan.primitives[m.index()].is_empty()) {
-            instances.push(Instance { mesh: mesh.index(), transform: world, node: Some(node.index()) });
+            let place = |transform| Instance { mesh: mesh.index(), transform, node: Some(node.index()) };
+            match plan.instancing.transforms(document, node.index(), buffers)? {
+                None => instances.push(place(world)),
+                Some(copies) => instances.extend(copies.iter().map(|copy| place(multiply(&world, copy)))),
+            }
         }
         let children: Vec<_> = node.children().collect();
         stack.extend(children.into_iter().rev().map(|child| (child, world)));
@@ -429,10 +455,18 @@ fn expanded_sizes(document: &Document) -> KindResult<Vec<u64>> {
 }
 
 /// Checks every primitive of every instanced mesh and sizes the result against `limits`;
-/// `json_bytes` is the document's JSON, for the compressed views (see `meshopt`).
-fn plan(json_bytes: &[u8], document: &Document, instance_count: &[u64], limits: &ImportLimits) -> KindResult<Plan> {
+/// `json_bytes` is the document's JSON, for the compressed views (see `meshopt`); the GPU
+/// instancing accessors of nodes placing a mesh to read are checked too.
+fn plan(
+    json_bytes: &[u8],
+    document: &Document,
+    instance_count: &[u64],
+    limits: &ImportLimits,
+    instancing: gpu_instancing::GpuInstancing,
+) -> KindResult<Plan> {
     let mesh_count = document.meshes().len();
     let mut plan = Plan {
+        instancing,
         compressed: meshopt::Compressed::new(json_bytes)?,
         primitives: vec![Vec::new(); mesh_count],
         has_normals: true,
@@ -475,6 +509,11 @@ fn plan(json_bytes: &[u8], document: &Document, instance_count: &[u64], limits: 
     }
     check_triangle_count(plan.triangles, limits)?;
     check_vertex_count(plan.vertices, limits)?;
+    for node in document.nodes() {
+        if node.mesh().is_some_and(|m| instance_count[m.index()] > 0 && !plan.primitives[m.index()].is_empty()) {
+            plan.instancing.copies(document, node.index(), &mut plan.used_buffers)?;
+        }
+    }
     plan.compressed.mark_sources(&mut plan.used_buffers);
     Ok(plan)
 }
@@ -520,6 +559,10 @@ enum Use {
     Normal,
     TexCoord,
     Index,
+    /// EXT_mesh_gpu_instancing's attributes.
+    Translation,
+    Rotation,
+    Scale,
 }
 
 /// Checks that the crate's reader can read `accessor` as `use_` without panicking or
@@ -537,6 +580,9 @@ fn check_accessor(accessor: &Accessor, use_: Use, used_buffers: &mut [bool]) -> 
             (Dimensions::Vec2, &[DataType::F32, integers[0], integers[1], integers[2], integers[3]], "TEXCOORD_0")
         }
         Use::Index => (Dimensions::Scalar, &[DataType::U8, DataType::U16, DataType::U32], "indices"),
+        Use::Translation => (Dimensions::Vec3, &[DataType::F32, DataType::I8, DataType::I16], "TRANSLATION"),
+        Use::Rotation => (Dimensions::Vec4, &[DataType::F32, DataType::I8, DataType::I16], "ROTATION"),
+        Use::Scale => (Dimensions::Vec3, &[DataType::F32, DataType::I8, DataType::I16], "SCALE"),
     };
     if accessor.dimensions() != dimensions || !types.contains(&accessor.data_type()) {
         return Err(fail(format!(
@@ -545,8 +591,9 @@ fn check_accessor(accessor: &Accessor, use_: Use, used_buffers: &mut [bool]) -> 
             accessor.data_type()
         )));
     }
-    if matches!(use_, Use::Normal) && accessor.data_type() != DataType::F32 && !accessor.normalized() {
-        return Err(fail(format!("{:?} NORMAL must be normalized", accessor.data_type())));
+    let normalized_only = matches!(use_, Use::Normal | Use::Translation | Use::Rotation | Use::Scale);
+    if normalized_only && accessor.data_type() != DataType::F32 && !accessor.normalized() {
+        return Err(fail(format!("{:?} {name} must be normalized", accessor.data_type())));
     }
     let count = accessor.count();
     let element = accessor.size();

@@ -49,9 +49,12 @@
 //! - Buffers: the GLB binary chunk, base64 `data:` URIs, or files given by relative
 //!   (percent-encoded) URIs inside the glTF file's directory; `..` escapes, absolute paths
 //!   and `file:` URIs are refused. Only buffers of imported primitives are loaded; images
-//!   are never read. A required extension (`extensionsRequired`) is an error unless it is
-//!   one of the two above or changes nothing read here (`KHR_materials_*`, texture formats
-//!   and `KHR_texture_transform`, lights): Draco, GPU instancing and unknown ones are refused.
+//!   are never read. A node with EXT_mesh_gpu_instancing (`gltfpack -mi`) places its mesh
+//!   once per element of its TRANSLATION / ROTATION / SCALE accessors, each copy's transform
+//!   before the node's own (an instance each in [`import_scene`]). A required extension
+//!   (`extensionsRequired`) is an error unless it is one of those three or changes nothing
+//!   read here (`KHR_materials_*`, texture formats and `KHR_texture_transform`, lights):
+//!   Draco and unknown ones are refused.
 //!   UVs are read as stored: a texture's `KHR_texture_transform` (where gltfpack puts the
 //!   scale of quantized UVs) stays the material's to apply.
 //!

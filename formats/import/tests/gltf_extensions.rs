@@ -158,14 +158,84 @@ fn required_extensions_are_refused_only_where_they_can_change_the_geometry() {
         json["extensionsRequired"] = serde_json::json!(extensions);
         json["extensionsUsed"] = serde_json::json!(extensions);
     };
-    let neutral = ["KHR_mesh_quantization", "KHR_materials_pbrSpecularGlossiness", "KHR_texture_transform"];
+    let neutral = [
+        "KHR_mesh_quantization",
+        "KHR_materials_pbrSpecularGlossiness",
+        "KHR_texture_transform",
+        "EXT_mesh_gpu_instancing",
+    ];
     require(&mut json, &neutral);
     assert_eq!(import_bytes(&glb(&json, &bin)).unwrap().triangle_count(), 432);
-    for refused in ["KHR_draco_mesh_compression", "EXT_mesh_gpu_instancing", "VENDOR_unknown"] {
+    for refused in ["KHR_draco_mesh_compression", "VENDOR_unknown"] {
         require(&mut json, &["KHR_mesh_quantization", refused]);
         match import_bytes(&glb(&json, &bin)) {
             Err(ImportErrorKind::UnsupportedGltfExtension(e)) => assert_eq!(e, refused),
             other => panic!("{refused}: {:?}", other.map(|m| m.triangle_count())),
         }
     }
+}
+
+/// Asserts that `a` and `b` hold the same triangles up to `error` per corner: every triangle
+/// of `a` has one in `b` with its corners, in the same winding, that close.
+fn assert_same_triangles(name: &str, a: &SourceMesh, b: &SourceMesh, error: f32) {
+    assert_eq!(a.triangle_count(), b.triangle_count(), "{name}: triangles");
+    let corners = |m: &SourceMesh, t: &[u32]| [0, 1, 2].map(|k| m.positions[t[k] as usize]);
+    let others: Vec<[[f32; 3]; 3]> = b.indices.chunks_exact(3).map(|t| corners(b, t)).collect();
+    for t in a.indices.chunks_exact(3).map(|t| corners(a, t)) {
+        let same = |o: &[[f32; 3]; 3]| (0..3).any(|r| (0..3).all(|k| distance(&t[k], &o[(k + r) % 3]) <= error));
+        assert!(others.iter().any(same), "{name}: triangle {t:?} is not in the other mesh");
+    }
+}
+
+/// Every instance of `scene` as world triangles, in one mesh.
+fn placed(scene: &mres_import::scene::ImportedScene) -> SourceMesh {
+    let (mut positions, mut indices) = (Vec::new(), Vec::new());
+    for instance in &scene.instances {
+        let (mesh, m) = (&scene.meshes[instance.mesh].mesh, &instance.transform);
+        let base = positions.len() as u32;
+        positions.extend(
+            mesh.positions
+                .iter()
+                .map(|p| [0, 1, 2].map(|r| m[0][r] * p[0] + m[1][r] * p[1] + m[2][r] * p[2] + m[3][r])),
+        );
+        indices.extend(mesh.indices.iter().map(|i| base + i));
+    }
+    SourceMesh::positions_only(positions, indices)
+}
+
+/// `gpu_instancing_source.gltf`: a unit cube placed by seven nodes (rotations, non-uniform
+/// scales) under a rotated, scaled, moved parent; `gltfpack_gpu_instancing*.glb` are
+/// gltfpack 1.3's `-mi` output of it (one node, seven EXT_mesh_gpu_instancing copies whose
+/// transforms hold the parent's), quantized (i16 rotations) and `-noq`.
+#[test]
+fn gpu_instances_are_placements_of_one_mesh() {
+    let source = import(&data("gpu_instancing_source.gltf")).unwrap();
+    assert_eq!(source.triangle_count(), 7 * 12);
+    for (name, error) in [("gltfpack_gpu_instancing_float.glb", 1e-4), ("gltfpack_gpu_instancing.glb", 5e-3)] {
+        let flat = import(&data(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_same_triangles(name, &flat, &source, error);
+        let scene = mres_import::import_scene(&data(name), &ImportLimits::default()).unwrap();
+        assert!(scene.is_instanced(), "{name}: one mesh, placed seven times");
+        assert_eq!((scene.meshes.len(), scene.instances.len()), (1, 7), "{name}");
+        assert_eq!(scene.meshes[0].mesh.triangle_count(), 12, "{name}: the cube once");
+        assert_same_triangles(name, &placed(&scene), &source, error);
+    }
+    // The copies' transforms come before the node's own: the same transform on the
+    // instancing node and above the source's root gives the same triangles.
+    let (trs, s) = (serde_json::json!([5.0, -2.0, 1.0]), 0.5f64.sin() / 2f64.sqrt());
+    let rotation = serde_json::json!([s, 0.0, s, 0.5f64.cos()]);
+    let (mut json, bin) = chunks(&std::fs::read(data("gltfpack_gpu_instancing_float.glb")).unwrap());
+    let node = json["nodes"].as_array_mut().unwrap().iter_mut().find(|n| n.get("extensions").is_some()).unwrap();
+    (node["translation"], node["rotation"], node["scale"]) =
+        (trs.clone(), rotation.clone(), serde_json::json!([1.5, 1.5, 1.5]));
+    let moved = import_bytes(&glb(&json, &bin)).unwrap();
+    let mut source: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(data("gpu_instancing_source.gltf")).unwrap()).unwrap();
+    let above =
+        serde_json::json!({"children": [0], "translation": trs, "rotation": rotation, "scale": [1.5, 1.5, 1.5]});
+    source["nodes"].as_array_mut().unwrap().push(above);
+    source["scenes"][0]["nodes"] = serde_json::json!([8]);
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("source.gltf"), serde_json::to_vec(&source).unwrap()).unwrap();
+    assert_same_triangles("moved", &moved, &import(&dir.path().join("source.gltf")).unwrap(), 1e-3);
 }
