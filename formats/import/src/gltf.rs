@@ -264,6 +264,12 @@ fn parse_document(json_bytes: &[u8]) -> KindResult<Document> {
     })
 }
 
+/// The parts of the glTF JSON an extension module reads (the crate keeps no extension it
+/// does not know); the JSON is valid, the crate parsed it.
+fn extension_json<T: serde::de::DeserializeOwned>(json_bytes: &[u8]) -> KindResult<T> {
+    serde_json::from_slice(json_bytes).map_err(|e| ImportErrorKind::Parse(format!("invalid glTF JSON: {e}")))
+}
+
 /// Whether a file that requires `extension` (`extensionsRequired`) can be imported: one
 /// decoded here, or one that changes nothing this importer reads (it reads geometry, and
 /// materials by index and name: material models, texture formats and transforms, lights).

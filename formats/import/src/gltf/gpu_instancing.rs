@@ -49,8 +49,7 @@ pub(super) struct GpuInstancing {
 impl GpuInstancing {
     /// Reads the extension's blocks from the glTF JSON (valid JSON: the crate parsed it).
     pub(super) fn new(json_bytes: &[u8]) -> KindResult<GpuInstancing> {
-        let root: RootJson = serde_json::from_slice(json_bytes)
-            .map_err(|e| ImportErrorKind::Parse(format!("invalid glTF JSON: {e}")))?;
+        let root: RootJson = super::extension_json(json_bytes)?;
         let nodes = root
             .nodes
             .into_iter()

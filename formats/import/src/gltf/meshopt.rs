@@ -81,8 +81,7 @@ pub(super) struct Compressed {
 impl Compressed {
     /// Reads the extension's blocks from the glTF JSON (valid JSON: the crate parsed it).
     pub(super) fn new(json_bytes: &[u8]) -> KindResult<Compressed> {
-        let root: RootJson = serde_json::from_slice(json_bytes)
-            .map_err(|e| ImportErrorKind::Parse(format!("invalid glTF JSON: {e}")))?;
+        let root: RootJson = super::extension_json(json_bytes)?;
         let fallback = root
             .buffers
             .iter()
