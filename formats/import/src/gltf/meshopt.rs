@@ -138,33 +138,30 @@ impl Compressed {
             }
         }
         for view in self.views.iter().filter(|v| used.get(v.target.0).copied().unwrap_or(false)) {
-            let fail = |reason: String| {
+            view.decode_into(buffers).map_err(|reason| {
                 ImportErrorKind::Parse(format!("bufferView {} (EXT_meshopt_compression): {reason}", view.index))
-            };
-            let c = &view.compression;
-            let source = buffers
-                .get(c.buffer)
-                .and_then(|d| d.as_deref())
-                .ok_or_else(|| fail(format!("buffer {} is not loaded", c.buffer)))?;
-            let encoded = source.get(c.byte_offset..c.byte_offset.saturating_add(c.byte_length)).ok_or_else(|| {
-                fail(format!(
-                    "{} bytes from offset {} run past buffer {} ({} bytes)",
-                    c.byte_length,
-                    c.byte_offset,
-                    c.buffer,
-                    source.len()
-                ))
             })?;
-            let (t, offset, length) = view.target;
-            let decoded = decode(c, encoded, length).map_err(fail)?;
-            let target =
-                buffers.get_mut(t).and_then(|d| d.as_mut()).ok_or_else(|| fail(format!("buffer {t} is not loaded")))?;
-            let slot = target
-                .to_mut()
-                .get_mut(offset..offset.saturating_add(decoded.len()))
-                .ok_or_else(|| fail(format!("offset {offset} and {length} bytes run past buffer {t}")))?;
-            slot.copy_from_slice(&decoded);
         }
+        Ok(())
+    }
+}
+
+impl View {
+    /// Decodes this view from its source buffer into its own (both loaded in `buffers`).
+    fn decode_into(&self, buffers: &mut [Option<Cow<'_, [u8]>>]) -> Result<(), String> {
+        let c = &self.compression;
+        let loaded = |b: usize| format!("buffer {b} is not loaded");
+        let source = buffers.get(c.buffer).and_then(|d| d.as_deref()).ok_or_else(|| loaded(c.buffer))?;
+        let (offset, length) = (c.byte_offset, c.byte_length);
+        let encoded = source.get(offset..offset.saturating_add(length)).ok_or_else(|| {
+            format!("{length} bytes from offset {offset} run past buffer {} ({} bytes)", c.buffer, source.len())
+        })?;
+        let (t, offset, length) = self.target;
+        let decoded = decode(c, encoded, length)?;
+        let target = buffers.get_mut(t).and_then(|d| d.as_mut()).ok_or_else(|| loaded(t))?;
+        let slot = target.to_mut().get_mut(offset..offset.saturating_add(decoded.len()));
+        slot.ok_or_else(|| format!("offset {offset} and {length} bytes run past buffer {t}"))?
+            .copy_from_slice(&decoded);
         Ok(())
     }
 }
