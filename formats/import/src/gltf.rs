@@ -69,7 +69,7 @@ struct Plan {
     triangles: u64,
 }
 
-/// Per-buffer data, `None` for buffers no imported primitive reads.
+/// Per-buffer data, `None` for buffers the import does not read (see `Plan::used_buffers`).
 type Buffers<'a> = Vec<Option<Cow<'a, [u8]>>>;
 
 /// Imports a `.gltf` or `.glb` file whose bytes are `bytes` (not empty, size-checked).
