@@ -264,6 +264,12 @@ fn parse_document(json_bytes: &[u8]) -> KindResult<Document> {
     })
 }
 
+/// Whether the file declares `extension` in `extensionsUsed`, as glTF requires of every
+/// extension it uses: the JSON is read again for an extension's blocks only then.
+fn uses(document: &Document, extension: &str) -> bool {
+    document.extensions_used().any(|e| e == extension)
+}
+
 /// The parts of the glTF JSON an extension module reads (the crate keeps no extension it
 /// does not know); the JSON is valid, the crate parsed it.
 fn extension_json<T: serde::de::DeserializeOwned>(json_bytes: &[u8]) -> KindResult<T> {
@@ -327,7 +333,10 @@ fn prepare_positions(root: &mut json::Root) -> KindResult<()> {
 /// How many times the scene places each mesh ([`mesh_instance_counts`]), and the [`Plan`]:
 /// every check before a buffer is read.
 fn checked(json_bytes: &[u8], document: &Document, limits: &ImportLimits) -> KindResult<(Vec<u64>, Plan)> {
-    let instancing = gpu_instancing::GpuInstancing::new(json_bytes)?;
+    let instancing = match uses(document, "EXT_mesh_gpu_instancing") {
+        true => gpu_instancing::GpuInstancing::new(json_bytes)?,
+        false => Default::default(),
+    };
     let counts = mesh_instance_counts(document, &instancing)?;
     let plan = plan(json_bytes, document, &counts, limits, instancing)?;
     Ok((counts, plan))
@@ -473,7 +482,10 @@ fn plan(
     let mesh_count = document.meshes().len();
     let mut plan = Plan {
         instancing,
-        compressed: meshopt::Compressed::new(json_bytes)?,
+        compressed: match uses(document, "EXT_meshopt_compression") {
+            true => meshopt::Compressed::new(json_bytes)?,
+            false => Default::default(),
+        },
         primitives: vec![Vec::new(); mesh_count],
         has_normals: true,
         has_uvs: true,
@@ -576,15 +588,11 @@ enum Use {
 fn check_accessor(accessor: &Accessor, use_: Use, used_buffers: &mut [bool]) -> KindResult<usize> {
     let fail = |reason: String| ImportErrorKind::InvalidAccessor { accessor: accessor.index(), reason };
     // Besides f32, the integer types KHR_mesh_quantization allows (see `attributes`).
-    let integers = [DataType::I8, DataType::U8, DataType::I16, DataType::U16];
+    let any = [DataType::F32, DataType::I8, DataType::U8, DataType::I16, DataType::U16];
     let (dimensions, types, name): (_, &[DataType], _) = match use_ {
-        Use::Position => {
-            (Dimensions::Vec3, &[DataType::F32, integers[0], integers[1], integers[2], integers[3]], "POSITION")
-        }
+        Use::Position => (Dimensions::Vec3, &any, "POSITION"),
         Use::Normal => (Dimensions::Vec3, &[DataType::F32, DataType::I8, DataType::I16], "NORMAL"),
-        Use::TexCoord => {
-            (Dimensions::Vec2, &[DataType::F32, integers[0], integers[1], integers[2], integers[3]], "TEXCOORD_0")
-        }
+        Use::TexCoord => (Dimensions::Vec2, &any, "TEXCOORD_0"),
         Use::Index => (Dimensions::Scalar, &[DataType::U8, DataType::U16, DataType::U32], "indices"),
         Use::Translation => (Dimensions::Vec3, &[DataType::F32, DataType::I8, DataType::I16], "TRANSLATION"),
         Use::Rotation => (Dimensions::Vec4, &[DataType::F32, DataType::I8, DataType::I16], "ROTATION"),

@@ -108,13 +108,14 @@ impl GpuInstancing {
                 attributes::read::<4>(accessor, data).ok_or_else(|| unreadable(index))?
             }
         };
-        let count = self.copies(document, node, &mut vec![false; document.buffers().len()])?;
+        // At least one accessor is given and they agree on their count (see `copies`), so the
+        // zip ends with them; an absent one repeats its default.
         let copies = read3(translation, [0.0; 3])?.zip(rotations).zip(read3(scale, [1.0; 3])?);
         let transform = |((translation, rotation), scale): (([f32; 3], [f32; 4]), [f32; 3])| {
             let length = rotation.iter().map(|c| c * c).sum::<f32>().sqrt();
             let rotation = if length > 0.0 { rotation.map(|c| c / length) } else { [0.0, 0.0, 0.0, 1.0] };
             Transform::Decomposed { translation, rotation, scale }.matrix()
         };
-        Ok(Some(copies.take(count as usize).map(transform).collect()))
+        Ok(Some(copies.map(transform).collect()))
     }
 }

@@ -174,53 +174,30 @@ fn decode(c: &Compression, encoded: &[u8], length: usize) -> Result<Vec<u8>, Str
         .checked_mul(stride)
         .filter(|&s| s <= length)
         .ok_or_else(|| format!("{count} elements of {stride} bytes do not fit its {length} bytes"))?;
-    let mut out = vec![0u8; size];
-    let code = match c.mode.as_str() {
-        "ATTRIBUTES" => {
-            if stride == 0 || stride > 256 || stride % 4 != 0 {
-                return Err(format!("byteStride {stride} is not a multiple of 4 from 4 to 256"));
-            }
-            // SAFETY: `out` holds `count` elements of `stride` bytes; the decoder reads at
-            // most `encoded.len()` bytes and returns an error on a malformed stream.
-            unsafe {
-                ::meshopt::ffi::meshopt_decodeVertexBuffer(
-                    out.as_mut_ptr().cast(),
-                    count,
-                    stride,
-                    encoded.as_ptr(),
-                    encoded.len(),
-                )
-            }
+    // The mode's decoder, after the checks of the sizes it asserts on; all three share one
+    // signature (destination, count, element size, stream, stream length).
+    type Decoder = unsafe extern "C" fn(*mut std::ffi::c_void, usize, usize, *const u8, usize) -> std::ffi::c_int;
+    let indices = |decoder: Decoder| match stride {
+        2 | 4 => Ok(decoder),
+        _ => Err(format!("byteStride {stride} of indices is not 2 or 4")),
+    };
+    let decoder: Decoder = match c.mode.as_str() {
+        "ATTRIBUTES" if stride == 0 || stride > 256 || !stride.is_multiple_of(4) => {
+            return Err(format!("byteStride {stride} is not a multiple of 4 from 4 to 256"));
         }
-        "TRIANGLES" | "INDICES" => {
-            if stride != 2 && stride != 4 {
-                return Err(format!("byteStride {stride} of indices is not 2 or 4"));
-            }
-            if c.mode == "TRIANGLES" && count % 3 != 0 {
-                return Err(format!("count {count} of TRIANGLES is not a multiple of 3"));
-            }
-            // SAFETY: as above, with `count` indices of `stride` bytes.
-            unsafe {
-                match c.mode.as_str() {
-                    "TRIANGLES" => ::meshopt::ffi::meshopt_decodeIndexBuffer(
-                        out.as_mut_ptr().cast(),
-                        count,
-                        stride,
-                        encoded.as_ptr(),
-                        encoded.len(),
-                    ),
-                    _ => ::meshopt::ffi::meshopt_decodeIndexSequence(
-                        out.as_mut_ptr().cast(),
-                        count,
-                        stride,
-                        encoded.as_ptr(),
-                        encoded.len(),
-                    ),
-                }
-            }
+        "ATTRIBUTES" => ::meshopt::ffi::meshopt_decodeVertexBuffer,
+        "TRIANGLES" if !count.is_multiple_of(3) => {
+            return Err(format!("count {count} of TRIANGLES is not a multiple of 3"));
         }
+        "TRIANGLES" => indices(::meshopt::ffi::meshopt_decodeIndexBuffer)?,
+        "INDICES" => indices(::meshopt::ffi::meshopt_decodeIndexSequence)?,
         other => return Err(format!("unknown mode {other:?}")),
     };
+    let mut out = vec![0u8; size];
+    // SAFETY: `out` holds `count` elements of `stride` bytes, a size the decoder accepts
+    // (checked above); it reads at most `encoded.len()` bytes and returns an error on a
+    // malformed stream.
+    let code = unsafe { decoder(out.as_mut_ptr().cast(), count, stride, encoded.as_ptr(), encoded.len()) };
     if code != 0 {
         return Err(format!("the {} stream does not decode (meshoptimizer error {code})", c.mode));
     }
